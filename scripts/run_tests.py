@@ -1,0 +1,152 @@
+#!/usr/bin/python3
+"""Runs every test of the workspace: gtest binaries, pytest suites, rostests.
+
+Each phase writes JUnit XML under test_results/, and the run ends with one line
+"N passed, N failed, N skipped". The exit code is non-zero when a test failed,
+when a phase could not run, or when no test ran at all.
+
+Usage: run_tests.py [--phase gtest|pytest|rostest ...] [-k PYTEST_EXPR]
+"""
+import argparse
+import glob
+import os
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RESULTS = os.path.join(ROOT, "test_results")
+DEVEL = os.path.join(ROOT, "catkin_ws", "devel")
+PACKAGES = ["sharing_msgs", "sharing_layer_cpp", "sharing_handler_py",
+            "coaty_bridge", "fleet_sim", "launch", "tests"]
+
+
+class Tally:
+    def __init__(self):
+        self.passed = self.failed = self.skipped = 0
+        self.failures = []
+
+    def add_junit(self, path, label):
+        """Adds the counts of one JUnit XML file; a file that can't be read is a failure."""
+        try:
+            root = ET.parse(path).getroot()
+        except (ET.ParseError, OSError) as err:
+            self.failed += 1
+            self.failures.append("%s: unreadable result file %s (%s)" % (label, path, err))
+            return
+        suites = [root] if root.tag == "testsuite" else root.iter("testsuite")
+        for suite in suites:
+            for case in suite.iter("testcase"):
+                name = "%s.%s" % (case.get("classname", ""), case.get("name", ""))
+                if case.find("failure") is not None or case.find("error") is not None:
+                    self.failed += 1
+                    self.failures.append("%s: %s" % (label, name))
+                elif case.find("skipped") is not None:
+                    self.skipped += 1
+                else:
+                    self.passed += 1
+
+    def fail(self, reason):
+        self.failed += 1
+        self.failures.append(reason)
+
+
+def run_gtests(tally):
+    binaries = sorted(p for p in glob.glob(os.path.join(DEVEL, "lib", "*", "test_*"))
+                      if os.access(p, os.X_OK) and os.path.isfile(p))
+    if not binaries:
+        tally.fail("gtest: no test binaries under %s/lib (did 'make build' run?)" % DEVEL)
+        return
+    for i, binary in enumerate(binaries, 1):
+        name = os.path.basename(binary)
+        xml = os.path.join(RESULTS, "gtest", name + ".xml")
+        print("[gtest %d/%d] %s" % (i, len(binaries), name), flush=True)
+        proc = subprocess.run([binary, "--gtest_output=xml:" + xml], cwd=ROOT)
+        if os.path.exists(xml):
+            tally.add_junit(xml, "gtest " + name)
+            if proc.returncode != 0 and not tally.failures:
+                tally.fail("gtest %s exited %d" % (name, proc.returncode))
+        else:
+            tally.fail("gtest %s crashed (exit %d, no result file)" % (name, proc.returncode))
+
+
+def run_pytest(tally, expr):
+    paths = [p for p in (os.path.join(ROOT, pkg, "test") for pkg in PACKAGES) if os.path.isdir(p)]
+    if not paths:
+        tally.fail("pytest: no test folders found")
+        return
+    xml = os.path.join(RESULTS, "pytest.xml")
+    cmd = [sys.executable, "-m", "pytest", "-q", "-rs", "--junitxml=" + xml,
+           "-p", "no:cacheprovider"] + paths
+    if expr:
+        cmd += ["-k", expr]
+    print("[pytest] %s" % " ".join(os.path.relpath(p, ROOT) for p in paths), flush=True)
+    proc = subprocess.run(cmd, cwd=ROOT)
+    if os.path.exists(xml):
+        tally.add_junit(xml, "pytest")
+    if proc.returncode not in (0, 1, 5):
+        tally.fail("pytest exited %d (usage or internal error)" % proc.returncode)
+
+
+def run_rostests(tally):
+    files = []
+    for pkg in PACKAGES:
+        files += glob.glob(os.path.join(ROOT, pkg, "test", "**", "*.test"), recursive=True)
+    files.sort()
+    if not files:
+        print("[rostest] no .test files", flush=True)
+        return
+    for i, path in enumerate(files, 1):
+        rel = os.path.relpath(path, ROOT)
+        name = os.path.splitext(os.path.basename(path))[0]
+        out_dir = os.path.join(RESULTS, "rostest", name)
+        print("[rostest %d/%d] %s" % (i, len(files), rel), flush=True)
+        start = time.time()
+        proc = subprocess.run(["rostest", "--results-base-dir", out_dir, path], cwd=ROOT)
+        results = glob.glob(os.path.join(out_dir, "**", "rosunit-*.xml"), recursive=True) + \
+            glob.glob(os.path.join(out_dir, "**", "rostest-*.xml"), recursive=True)
+        counted = False
+        for xml in sorted(set(glob.glob(os.path.join(out_dir, "**", "*.xml"), recursive=True))):
+            if os.path.basename(xml).startswith("rostest-"):
+                continue  # the summary file duplicates the per-test files
+            tally.add_junit(xml, "rostest " + name)
+            counted = True
+        if not counted and results:
+            for xml in results:
+                tally.add_junit(xml, "rostest " + name)
+                counted = True
+        if proc.returncode != 0 and not any(name in f for f in tally.failures):
+            tally.fail("rostest %s exited %d after %.0f s" % (rel, proc.returncode, time.time() - start))
+        elif not counted:
+            tally.fail("rostest %s produced no results" % rel)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--phase", action="append", choices=["gtest", "pytest", "rostest"])
+    parser.add_argument("-k", dest="expr", help="pytest -k expression")
+    args = parser.parse_args()
+    phases = args.phase or ["gtest", "pytest", "rostest"]
+    os.makedirs(RESULTS, exist_ok=True)
+
+    tally = Tally()
+    if "gtest" in phases:
+        run_gtests(tally)
+    if "pytest" in phases:
+        run_pytest(tally, args.expr)
+    if "rostest" in phases:
+        run_rostests(tally)
+
+    for failure in tally.failures:
+        print("FAILED  " + failure)
+    if tally.passed + tally.failed == 0:
+        print("run_tests: no test ran")
+        print("0 passed, 1 failed")
+        return 1
+    print("%d passed, %d failed, %d skipped" % (tally.passed, tally.failed, tally.skipped))
+    return 1 if tally.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

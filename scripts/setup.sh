@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Installs everything the project needs on Debian 12, as root, without asking.
+# Idempotent: when every package is already there it only checks and returns.
+set -euo pipefail
+
+PACKAGES=(
+  # ROS 1 core from Debian's archive (ros_comm 1.15, Noetic level)
+  ros-core-dev ros-base-dev catkin python3-catkin-pkg rosbash
+  python3-rospy libroscpp-dev python3-rostest librostest-dev python3-rosbag
+  pluginlib-dev libtf2-ros-dev python3-tf2-ros liblaser-geometry-dev
+  libnav-msgs-dev libmap-msgs-dev libmove-base-msgs-dev python3-actionlib
+  # C++ core, bindings and tests
+  build-essential cmake pybind11-dev libgtest-dev googletest
+  # Python dependencies, all from Debian
+  python3-numpy python3-scipy python3-pytest python3-hypothesis python3-yaml
+  python3-pil python3-paho-mqtt
+  # message packages the nodes use directly
+  python3-diagnostic-msgs python3-visualization-msgs python3-std-srvs
+  python3-move-base-msgs python3-nav-msgs python3-sensor-msgs python3-geometry-msgs
+  python3-tf2-msgs libdiagnostic-msgs-dev libvisualization-msgs-dev
+  # the MQTT broker, and Node.js/npm for the Coaty JS interop test
+  mosquitto nodejs npm
+)
+
+missing=()
+for pkg in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$pkg")
+  fi
+done
+
+# Node.js may come from elsewhere on the machine (e.g. a preinstalled node);
+# only ask apt for it when there is no node/npm at all.
+if command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1; then
+  filtered=()
+  for pkg in "${missing[@]}"; do
+    [[ "$pkg" == nodejs || "$pkg" == npm ]] || filtered+=("$pkg")
+  done
+  missing=("${filtered[@]+"${filtered[@]}"}")
+fi
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "setup: all ${#PACKAGES[@]} Debian packages present"
+  exit 0
+fi
+
+if [ "$(id -u)" -ne 0 ]; then
+  echo "setup: missing packages: ${missing[*]}" >&2
+  echo "setup: run 'make setup' as root (it uses apt-get) or install them yourself" >&2
+  exit 1
+fi
+
+echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "setup: done"
