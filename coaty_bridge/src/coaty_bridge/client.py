@@ -1,0 +1,385 @@
+"""The MQTT side of a bridge: one Coaty agent on Debian's python3-paho-mqtt
+(1.x callback API; on paho 2.x the VERSION1 API is requested explicitly).
+
+The agent advertises its Identity on every (re)connect, leaves a last-will
+Deadvertise, answers Identity Discovers, publishes obstacle updates as
+Advertise events of one custom objectType, answers obstacle Discovers from the
+robot's current list with one Resolve per obstacle, and on every connect asks
+its peers for their obstacles (late joiner). Bad input is dropped, logged once
+and counted; the MQTT thread never sees an exception.
+"""
+import collections
+import logging
+import ssl
+import threading
+import time
+import urllib.parse
+from dataclasses import dataclass, field
+
+import paho.mqtt.client as mqtt
+
+from coaty_bridge import codec
+from coaty_bridge.errors import CoatyError
+from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
+
+LOG = logging.getLogger(__name__)
+
+_SCHEMES = {"mqtt": (False, 1883), "tcp": (False, 1883), "mqtts": (True, 8883),
+            "ssl": (True, 8883), "tls": (True, 8883)}
+
+
+@dataclass(frozen=True)
+class BrokerAddress:
+    host: str
+    port: int
+    tls: bool
+
+
+def parse_broker_url(url):
+    """'mqtt://host:port' (or mqtts://, tcp://, ssl://) -> BrokerAddress; ValueError otherwise."""
+    if not isinstance(url, str):
+        raise ValueError("broker_url %r is not a string" % (url,))
+    try:
+        parts = urllib.parse.urlsplit(url)
+        port = parts.port
+    except ValueError as err:
+        raise ValueError("broker_url %r: %s" % (url, err))
+    if parts.scheme not in _SCHEMES or not parts.hostname or parts.path not in ("", "/"):
+        raise ValueError("broker_url %r is not mqtt://host[:port] or mqtts://host[:port]" % (url,))
+    tls, default_port = _SCHEMES[parts.scheme]
+    return BrokerAddress(parts.hostname, port or default_port, tls)
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    """Everything one bridge agent needs; field names are the node's private
+    parameter names, and a bad value raises ValueError naming parameter and value."""
+    robot_name: str
+    broker_url: str = "mqtt://127.0.0.1:1883"
+    namespace: str = "fleet"
+    object_type: str = codec.DEFAULT_OBJECT_TYPE
+    identity_id: str = ""
+    tls_ca: str = ""
+    tls_cert: str = ""
+    tls_key: str = ""
+    username: str = ""
+    password: str = ""
+    max_payload_bytes: int = 1024 * 1024
+    max_indexes: int = 1_000_000
+    offline_queue_size: int = 1000
+    compact_indexes: bool = True
+    keepalive: int = 60
+    reconnect_min_delay: float = 0.5
+    reconnect_max_delay: float = 30.0
+    discover_window: float = 30.0
+    address: BrokerAddress = field(init=False, repr=False)
+
+    def __post_init__(self):
+        def fail(name, why):
+            raise ValueError("parameter %s = %r: %s" % (name, getattr(self, name), why))
+        for name in ("robot_name", "namespace", "object_type"):
+            try:
+                check_name(getattr(self, name), name)
+            except CoatyError as err:
+                fail(name, err)
+        if self.object_type.startswith("coaty."):
+            fail("object_type", "the coaty.* object types are reserved")
+        if self.identity_id:
+            try:
+                object.__setattr__(self, "identity_id", check_uuid(self.identity_id, "identity_id"))
+            except CoatyError as err:
+                fail("identity_id", err)
+        else:
+            object.__setattr__(self, "identity_id", new_uuid())
+        try:
+            object.__setattr__(self, "address", parse_broker_url(self.broker_url))
+        except ValueError as err:
+            fail("broker_url", err)
+        for name in ("tls_ca", "tls_cert", "tls_key", "username", "password"):
+            if not isinstance(getattr(self, name), str):
+                fail(name, "not a string")
+        if bool(self.tls_cert) != bool(self.tls_key):
+            fail("tls_cert", "tls_cert and tls_key go together")
+        if self.password and not self.username:
+            fail("password", "a password needs a username")
+        for name, low in (("max_payload_bytes", 64), ("max_indexes", 1), ("offline_queue_size", 0),
+                          ("keepalive", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                fail(name, "must be an integer >= %d" % low)
+        if not isinstance(self.compact_indexes, bool):
+            fail("compact_indexes", "must be true or false")
+        for name in ("reconnect_min_delay", "reconnect_max_delay", "discover_window"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e6:
+                fail(name, "must be a positive number of seconds")
+        if self.reconnect_max_delay < self.reconnect_min_delay:
+            fail("reconnect_max_delay", "smaller than reconnect_min_delay")
+
+    @property
+    def use_tls(self):
+        return self.address.tls or bool(self.tls_ca)
+
+    @property
+    def limits(self):
+        return codec.CodecLimits(self.max_payload_bytes, self.max_indexes)
+
+
+def _make_paho_client(client_id):
+    if hasattr(mqtt, "CallbackAPIVersion"):  # paho-mqtt >= 2.0
+        return mqtt.Client(mqtt.CallbackAPIVersion.VERSION1, client_id=client_id, clean_session=True)
+    return mqtt.Client(client_id=client_id, clean_session=True)
+
+
+class CoatyBridgeClient:
+    """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
+    MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
+
+    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0):
+        self.config = config
+        self.identity_id = config.identity_id
+        self._on_obstacle = on_obstacle
+        self._clock = clock
+        self._qos = qos
+        self._lock = threading.Lock()
+        self._counters = collections.Counter()
+        self._queue = collections.deque()
+        self._current = ()
+        self._pending_discovers = {}
+        self._connected = False
+        self._ever_connected = False
+        self._stopping = False
+        ns = config.namespace
+        self._identity = codec.identity_object(self.identity_id, config.robot_name)
+        self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
+        self._dad_topic = str(Topic(ns, "DAD", self.identity_id))
+        self._subscriptions = [
+            (subscription(ns, "ADV::" + config.object_type), qos),
+            (subscription(ns, "DSC", two_way=True), qos),
+            (subscription(ns, "RSV", two_way=True), qos),
+        ]
+        self._mqtt = _make_paho_client("Coaty" + self.identity_id.replace("-", "")[:18])
+        self._mqtt.will_set(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=0)
+        if config.use_tls:
+            self._mqtt.tls_set(ca_certs=config.tls_ca or None, certfile=config.tls_cert or None,
+                               keyfile=config.tls_key or None, cert_reqs=ssl.CERT_REQUIRED)
+        if config.username:
+            self._mqtt.username_pw_set(config.username, config.password or None)
+        self._mqtt.reconnect_delay_set(min_delay=config.reconnect_min_delay,
+                                       max_delay=config.reconnect_max_delay)
+        self._mqtt.on_connect = self._on_connect
+        self._mqtt.on_disconnect = self._on_disconnect
+        self._mqtt.on_message = self.on_message
+
+    # ------------------------------------------------------------ lifecycle
+
+    def start(self):
+        """Connects in the background; reconnects with backoff until stop()."""
+        address = self.config.address
+        self._mqtt.connect_async(address.host, address.port, keepalive=self.config.keepalive)
+        self._mqtt.loop_start()
+
+    def stop(self, timeout=2.0):
+        """Deadvertises the Identity explicitly (a clean disconnect discards the will),
+        then disconnects and stops the MQTT thread."""
+        self._stopping = True
+        if self._connected:
+            try:
+                info = self._mqtt.publish(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=1)
+                info.wait_for_publish(timeout)
+            except (RuntimeError, ValueError) as err:
+                LOG.warning("%s: could not deadvertise before disconnecting: %s", self.config.robot_name, err)
+        self._mqtt.disconnect()
+        self._mqtt.loop_stop()
+
+    def kill(self):
+        """Drops the connection without a Deadvertise, as a crash would (tests only):
+        the broker then publishes the last will."""
+        self._stopping = True
+        sock = self._mqtt.socket()
+        self._mqtt.loop_stop()
+        if sock is not None:
+            sock.close()
+
+    @property
+    def connected(self):
+        return self._connected
+
+    def counters(self):
+        """A snapshot of all counters (dropped.<reason>, published, received, ...)."""
+        with self._lock:
+            snapshot = dict(self._counters)
+            snapshot["queue_length"] = len(self._queue)
+        return snapshot
+
+    def _count(self, key, n=1):
+        with self._lock:
+            self._counters[key] += n
+
+    # ------------------------------------------------------------- outgoing
+
+    def publish_obstacle(self, update):
+        """Publishes one internal ObstacleUpdate to the fleet (Advertise). Returns
+        False if it was dropped (too large); queues it while offline."""
+        payload = codec.advertise_payload(
+            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+        if len(payload) > self.config.max_payload_bytes:
+            self._count("dropped_outgoing.oversized")
+            LOG.warning("%s: obstacle %s v%d not published: %d bytes exceed max_payload_bytes %d",
+                        self.config.robot_name, update.uuid, update.version, len(payload),
+                        self.config.max_payload_bytes)
+            return False
+        self._count("published")
+        self._count("bytes_published", len(payload))
+        self._send(self._obstacle_topic, payload)
+        return True
+
+    def set_current_obstacles(self, updates):
+        """The robot's current full obstacles, used to answer obstacle Discovers."""
+        current = tuple(updates)
+        with self._lock:
+            self._current = current
+
+    def _send(self, topic, payload, queue=True):
+        with self._lock:
+            if self._connected:
+                info = self._mqtt.publish(topic, payload, qos=self._qos)
+                if info.rc == mqtt.MQTT_ERR_SUCCESS:
+                    return
+            if not queue:
+                return
+            if self.config.offline_queue_size == 0 or len(self._queue) >= self.config.offline_queue_size:
+                self._counters["queue_drops"] += 1
+                if self._queue:
+                    self._queue.popleft()  # the newest update is worth more than the oldest
+                else:
+                    return
+            self._queue.append((topic, payload))
+
+    def _flush_queue(self):
+        with self._lock:
+            pending, self._queue = list(self._queue), collections.deque()
+        for topic, payload in pending:
+            self._send(topic, payload)
+
+    def _discover_obstacles(self):
+        correlation_id = new_uuid()
+        now = self._clock()
+        with self._lock:
+            window = self.config.discover_window
+            self._pending_discovers = {c: t for c, t in self._pending_discovers.items() if now - t < window}
+            self._pending_discovers[correlation_id] = now
+        topic = Topic(self.config.namespace, "DSC", self.identity_id, correlation_id=correlation_id)
+        self._send(str(topic), codec.discover_object_types_payload([self.config.object_type]), queue=False)
+        self._count("discovers_sent")
+
+    # ------------------------------------------------------- paho callbacks
+
+    def _on_connect(self, client, userdata, flags, rc, properties=None):
+        if rc != 0:
+            self._count("connect_failures")
+            LOG.warning("%s: broker %s refused the connection: %s", self.config.robot_name,
+                        self.config.broker_url, mqtt.connack_string(rc))
+            return
+        client.subscribe(self._subscriptions)
+        with self._lock:
+            self._connected = True
+            if self._ever_connected:
+                self._counters["reconnects"] += 1
+            self._ever_connected = True
+        LOG.info("%s: connected to %s as Coaty agent %s", self.config.robot_name,
+                 self.config.broker_url, self.identity_id)
+        payload = codec.advertise_payload(self._identity)
+        ns = self.config.namespace
+        self._send(str(Topic(ns, "ADV", self.identity_id, core_type="Identity")), payload, queue=False)
+        self._send(str(Topic(ns, "ADV", self.identity_id, object_type=codec.IDENTITY_OBJECT_TYPE)),
+                   payload, queue=False)
+        self._flush_queue()
+        self._discover_obstacles()
+
+    def _on_disconnect(self, client, userdata, rc, properties=None):
+        with self._lock:
+            self._connected = False
+        if not self._stopping:
+            self._count("disconnects")
+            LOG.warning("%s: lost the broker %s (rc %s); reconnecting with backoff",
+                        self.config.robot_name, self.config.broker_url, rc)
+
+    def on_message(self, client, userdata, message):
+        """paho on_message: the boundary. Never raises."""
+        try:
+            self.handle(message.topic, message.payload)
+        except Exception as err:  # a bug must not kill the MQTT thread
+            self._count("dropped.internal_error")
+            LOG.error("%s: internal error on %r: %s: %s", self.config.robot_name,
+                      str(getattr(message, "topic", "?"))[:120], type(err).__name__, err)
+
+    def handle(self, topic_text, payload):
+        """Handles one MQTT message; bad input is counted, logged and dropped."""
+        try:
+            topic = parse_topic(topic_text)
+            if topic.source_id == self.identity_id:
+                self._count("echoes_suppressed")
+                return
+            if topic.namespace != self.config.namespace:
+                self._count("ignored")
+                return
+            if topic.event == "RSV" and not self._is_pending(topic.correlation_id):
+                self._count("ignored")  # a Resolve to somebody else's Discover
+                return
+            data = codec.parse_payload(payload, self.config.limits)
+            if topic.event == "ADV" and topic.object_type == self.config.object_type:
+                self._deliver(codec.decode_advertise(data, self.config.object_type, self.config.limits), topic)
+            elif topic.event == "DSC":
+                self._answer_discover(topic, codec.decode_discover(data, self.identity_id,
+                                                                   self.config.object_type))
+            elif topic.event == "RSV":
+                content = codec.decode_resolve(data, self.config.object_type, self.config.limits)
+                for err in content.errors:
+                    self._drop(err, topic_text, payload)
+                for update in content.obstacles:
+                    self._deliver(update, topic)
+            else:
+                self._count("ignored")
+        except CoatyError as err:
+            self._drop(err, topic_text, payload)
+
+    def _is_pending(self, correlation_id):
+        with self._lock:
+            started = self._pending_discovers.get(correlation_id)
+        return started is not None and self._clock() - started < self.config.discover_window
+
+    def _drop(self, err, topic_text, payload):
+        self._count("dropped." + err.reason)
+        excerpt = bytes(payload[:80]) if isinstance(payload, (bytes, bytearray)) else str(payload)[:80]
+        LOG.warning("%s: dropped %s on %r: %s; payload %r", self.config.robot_name, err.reason,
+                    str(topic_text)[:120], err, excerpt)
+
+    def _deliver(self, update, topic):
+        self._count("received")
+        try:
+            self._on_obstacle(update, topic)
+        except Exception as err:
+            self._count("dropped.delivery_error")
+            LOG.error("%s: could not deliver obstacle %s v%d from %s: %s: %s", self.config.robot_name,
+                      update.uuid, update.version, update.source, type(err).__name__, err)
+
+    def _answer_discover(self, topic, request):
+        ns = self.config.namespace
+        reply = str(Topic(ns, "RSV", self.identity_id, correlation_id=topic.correlation_id))
+        if request.identity:
+            self._send(reply, codec.resolve_payload(self._identity), queue=False)
+            self._count("resolves_sent")
+        if request.obstacles:
+            with self._lock:
+                current = self._current
+            for update in current:
+                payload = codec.resolve_payload(
+                    codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+                if len(payload) <= self.config.max_payload_bytes:
+                    self._send(reply, payload, queue=False)
+                    self._count("resolves_sent")
+                else:
+                    self._count("dropped_outgoing.oversized")
+        if not request.identity and not request.obstacles:
+            self._count("ignored")

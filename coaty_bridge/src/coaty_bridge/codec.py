@@ -1,0 +1,390 @@
+"""Coaty JSON <-> validated obstacle values. Imports neither paho nor rospy.
+
+Wire form of one obstacle update (a CoatyObject of the configured objectType;
+one object per obstacle: objectId is the obstacle uuid, every update of the
+obstacle re-advertises it with a higher version)::
+
+    {"objectType": "org.fleetsharing.SharedObstacle", "coreType": "CoatyObject",
+     "objectId": <uuid>, "name": "SharedObstacle <uuid>",
+     "uuid": <uuid>, "source": "robot_0", "version": 3, "stamp": 1700000000.25,
+     "frameId": "map", "deadline": 60, "rectangle": [min_x, min_y, max_x, max_y],
+     "resolution": 0.05, "origin": [x, y], "size": [size_x, size_y],
+     "markedIndexes": [...] | "<compact>", "clearedIndexes": [...] | "<compact>"}
+
+An index field is either a JSON array of ints or a string in the compact
+encoding of ``compact.py``; both mean the same set.
+"""
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Optional, Tuple
+
+from coaty_bridge import compact
+from coaty_bridge.errors import (CoatyError, InvalidJsonError, InvalidPayloadError, MissingFieldError,
+                                 NonFiniteNumberError, OutOfRangeError, PayloadTooLargeError,
+                                 TooManyIndexesError, WrongTypeError)
+from coaty_bridge.topics import check_name, check_uuid, _UUID_RE
+
+IDENTITY_OBJECT_TYPE = "coaty.Identity"
+IDENTITY_CORE_TYPE = "Identity"
+DEFAULT_OBJECT_TYPE = "org.fleetsharing.SharedObstacle"
+MAX_SAFE_INTEGER = 2 ** 53 - 1  # largest integer a JS number holds exactly
+MAX_UINT32 = 2 ** 32 - 1
+MAX_TEXT = 256
+
+
+@dataclass(frozen=True)
+class CodecLimits:
+    """Bounds applied to everything that arrives."""
+    max_payload_bytes: int = 1024 * 1024
+    max_indexes: int = 1_000_000
+
+    def __post_init__(self):
+        for name in ("max_payload_bytes", "max_indexes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError("%s must be a positive integer, got %r" % (name, value))
+
+
+def _is_uuid(value):
+    return isinstance(value, str) and bool(_UUID_RE.match(value))
+
+
+@dataclass(frozen=True)
+class ObstacleUpdate:
+    """One SharedObstacle as a validated value (field names as in the message;
+    ``stamp`` in seconds; index sets sorted and without duplicates)."""
+    uuid: str
+    source: str
+    version: int
+    stamp: float
+    frame_id: str
+    deadline: int
+    rectangle: Tuple[float, float, float, float]
+    resolution: float
+    origin_x: float
+    origin_y: float
+    size_x: int
+    size_y: int
+    marked: Tuple[int, ...] = ()
+    cleared: Tuple[int, ...] = ()
+
+    def __post_init__(self):
+        if not _is_uuid(self.uuid):
+            raise OutOfRangeError("obstacle uuid %r is not a UUID" % (self.uuid,))
+        object.__setattr__(self, "uuid", self.uuid.lower())
+        check_name(self.source, "source")
+        if len(self.source) > MAX_TEXT:
+            raise OutOfRangeError("source %r... longer than %d characters" % (self.source[:40], MAX_TEXT))
+        _check_int("version", self.version, 1, MAX_SAFE_INTEGER)
+        _check_int("deadline", self.deadline, 0, MAX_UINT32)
+        _check_int("size_x", self.size_x, 1, MAX_UINT32)
+        _check_int("size_y", self.size_y, 1, MAX_UINT32)
+        if self.size_x * self.size_y > MAX_UINT32 + 1:
+            raise OutOfRangeError("grid %d x %d has more cells than a uint32 index can address"
+                                  % (self.size_x, self.size_y))
+        for name in ("stamp", "resolution", "origin_x", "origin_y"):
+            _check_float(name, getattr(self, name))
+        if self.stamp < 0:
+            raise OutOfRangeError("stamp %r is negative" % (self.stamp,))
+        if not self.resolution > 0:
+            raise OutOfRangeError("resolution %r is not positive" % (self.resolution,))
+        if not isinstance(self.frame_id, str) or len(self.frame_id) > MAX_TEXT or "\0" in self.frame_id:
+            raise WrongTypeError("frame_id %r is not a short string" % (str(self.frame_id)[:40],))
+        rect = tuple(self.rectangle)
+        if len(rect) != 4:
+            raise OutOfRangeError("rectangle %r does not have 4 values" % (rect[:8],))
+        for value in rect:
+            _check_float("rectangle", value)
+        if rect[0] > rect[2] or rect[1] > rect[3]:
+            raise OutOfRangeError("rectangle %r has min > max" % (rect,))
+        object.__setattr__(self, "rectangle", tuple(float(v) for v in rect))
+        cells = self.size_x * self.size_y
+        for name in ("marked", "cleared"):
+            values = getattr(self, name)
+            for value in values:
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise WrongTypeError("%s index %r is not an integer" % (name, value))
+                if not 0 <= value < cells:
+                    raise OutOfRangeError("%s index %r outside the %d x %d grid"
+                                          % (name, value, self.size_x, self.size_y))
+            if len(values) > cells:
+                raise TooManyIndexesError("%d %s indexes for a grid of %d cells" % (len(values), name, cells))
+            object.__setattr__(self, name, tuple(sorted(set(values))))
+
+
+def _check_int(name, value, low, high):
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise WrongTypeError("%s %r is not an integer" % (name, value))
+    if not low <= value <= high:
+        raise OutOfRangeError("%s %r outside %d..%d" % (name, value, low, high))
+
+
+def _check_float(name, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise WrongTypeError("%s %r is not a number" % (name, value))
+    if not math.isfinite(value):
+        raise NonFiniteNumberError("%s %r is not finite" % (name, value))
+
+
+# ---------------------------------------------------------------- JSON parsing
+
+def _reject_constant(name):
+    raise NonFiniteNumberError("JSON constant %s is not allowed" % name)
+
+
+def parse_payload(payload, limits):
+    """bytes -> dict. Raises PayloadTooLargeError, InvalidJsonError, NonFiniteNumberError,
+    WrongTypeError (top level not an object)."""
+    if isinstance(payload, str):
+        payload = payload.encode("utf-8", "surrogatepass")
+    if len(payload) > limits.max_payload_bytes:
+        raise PayloadTooLargeError("payload of %d bytes exceeds max_payload_bytes %d"
+                                   % (len(payload), limits.max_payload_bytes))
+    try:
+        text = bytes(payload).decode("utf-8")
+        data = json.loads(text, parse_constant=_reject_constant)
+    except NonFiniteNumberError:
+        raise
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:
+        raise InvalidJsonError("payload is not UTF-8 JSON (%s): %r" % (str(err)[:80], bytes(payload[:60])))
+    if not isinstance(data, dict):
+        raise WrongTypeError("payload is a JSON %s, not an object" % type(data).__name__)
+    return data
+
+
+def dump(data):
+    """dict -> compact UTF-8 JSON bytes, refusing NaN (Coaty JS would drop the event)."""
+    return json.dumps(data, separators=(",", ":"), allow_nan=False).encode("utf-8")
+
+
+# ----------------------------------------------------------- field extraction
+
+def _get(obj, key):
+    if key not in obj:
+        raise MissingFieldError("field %r missing" % key)
+    return obj[key]
+
+
+def _num(obj, key):
+    value = _get(obj, key)
+    _check_float(key, value)
+    return float(value)
+
+
+def _int(obj, key, low, high):
+    value = _get(obj, key)
+    # JS has one number type: accept 3.0 for 3, reject 3.5.
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        value = int(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        raise NonFiniteNumberError("%s %r is not finite" % (key, value))
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise WrongTypeError("%s %r is not an integer" % (key, _short(value)))
+    if not low <= value <= high:
+        raise OutOfRangeError("%s %r outside %d..%d" % (key, value, low, high))
+    return value
+
+
+def _str(obj, key):
+    value = _get(obj, key)
+    if not isinstance(value, str):
+        raise WrongTypeError("%s %r is not a string" % (key, _short(value)))
+    return value
+
+
+def _num_list(obj, key, length):
+    value = _get(obj, key)
+    if not isinstance(value, list) or len(value) != length:
+        raise WrongTypeError("%s %r is not a list of %d numbers" % (key, _short(value), length))
+    for item in value:
+        _check_float(key, item)
+    return [float(v) for v in value]
+
+
+def _indexes(obj, key, cells, max_count):
+    value = _get(obj, key)
+    limit = min(cells, max_count)
+    if isinstance(value, str):
+        return compact.decode_indexes(value, cells, limit)
+    if not isinstance(value, list):
+        raise WrongTypeError("%s %r is neither a list nor a compact string" % (key, _short(value)))
+    if len(value) > limit:
+        raise TooManyIndexesError("%s has %d indexes, more than %d" % (key, len(value), limit))
+    for item in value:
+        if isinstance(item, float) and item.is_integer():
+            continue
+        if isinstance(item, bool) or not isinstance(item, int):
+            raise WrongTypeError("%s index %r is not an integer" % (key, _short(item)))
+    return tuple(int(v) for v in value)
+
+
+def _short(value):
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+# ----------------------------------------------------------------- obstacles
+
+def obstacle_to_object(update, object_type=DEFAULT_OBJECT_TYPE, compact_indexes=True):
+    """ObstacleUpdate -> CoatyObject dict."""
+    def indexes(values):
+        return compact.encode_indexes(values) if compact_indexes else list(values)
+    return {
+        "objectType": object_type,
+        "coreType": "CoatyObject",
+        "objectId": update.uuid,
+        "name": "SharedObstacle %s" % update.uuid,
+        "uuid": update.uuid,
+        "source": update.source,
+        "version": update.version,
+        "stamp": update.stamp,
+        "frameId": update.frame_id,
+        "deadline": update.deadline,
+        "rectangle": list(update.rectangle),
+        "resolution": update.resolution,
+        "origin": [update.origin_x, update.origin_y],
+        "size": [update.size_x, update.size_y],
+        "markedIndexes": indexes(update.marked),
+        "clearedIndexes": indexes(update.cleared),
+    }
+
+
+def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimits()):
+    """CoatyObject dict -> ObstacleUpdate; raises an InvalidPayloadError subclass
+    (or InvalidNameError for a bad source) naming the bad field and value."""
+    if not isinstance(obj, dict):
+        raise WrongTypeError("object %s is not a JSON object" % _short(obj))
+    if _str(obj, "objectType") != object_type:
+        raise WrongTypeError("objectType %r is not %r" % (_short(obj["objectType"]), object_type))
+    if _str(obj, "coreType") != "CoatyObject":
+        raise WrongTypeError("coreType %r is not 'CoatyObject'" % _short(obj["coreType"]))
+    object_id = _str(obj, "objectId")
+    _str(obj, "name")
+    uuid = _str(obj, "uuid")
+    if not _is_uuid(object_id) or uuid.lower() != object_id.lower():
+        raise OutOfRangeError("objectId %s must be the obstacle uuid %s" % (_short(object_id), _short(uuid)))
+    size = _get(obj, "size")
+    if not isinstance(size, list) or len(size) != 2:
+        raise WrongTypeError("size %s is not [size_x, size_y]" % _short(size))
+    size_x = _int({"size_x": size[0]}, "size_x", 1, MAX_UINT32)
+    size_y = _int({"size_y": size[1]}, "size_y", 1, MAX_UINT32)
+    cells = size_x * size_y
+    origin = _num_list(obj, "origin", 2)
+    return ObstacleUpdate(
+        uuid=uuid,
+        source=_str(obj, "source"),
+        version=_int(obj, "version", 1, MAX_SAFE_INTEGER),
+        stamp=_num(obj, "stamp"),
+        frame_id=_str(obj, "frameId"),
+        deadline=_int(obj, "deadline", 0, MAX_UINT32),
+        rectangle=tuple(_num_list(obj, "rectangle", 4)),
+        resolution=_num(obj, "resolution"),
+        origin_x=origin[0],
+        origin_y=origin[1],
+        size_x=size_x,
+        size_y=size_y,
+        marked=_indexes(obj, "markedIndexes", cells, limits.max_indexes),
+        cleared=_indexes(obj, "clearedIndexes", cells, limits.max_indexes),
+    )
+
+
+# -------------------------------------------------------------------- events
+
+def identity_object(identity_id, name):
+    """The Identity CoatyObject of one bridge (agent)."""
+    return {"objectType": IDENTITY_OBJECT_TYPE, "coreType": IDENTITY_CORE_TYPE,
+            "objectId": check_uuid(identity_id, "identity id"), "name": name}
+
+
+def advertise_payload(obj):
+    return dump({"object": obj})
+
+
+def deadvertise_payload(object_ids):
+    return dump({"objectIds": list(object_ids)})
+
+
+def discover_object_types_payload(object_types):
+    return dump({"objectTypes": list(object_types)})
+
+
+def resolve_payload(obj):
+    return dump({"object": obj})
+
+
+@dataclass(frozen=True)
+class DiscoverRequest:
+    """What a Discover asks of us: our Identity, our obstacles, or neither."""
+    identity: bool
+    obstacles: bool
+
+
+def decode_discover(data, identity_id, object_type):
+    """Discover payload dict -> DiscoverRequest; raises InvalidPayloadError when malformed."""
+    keys = [k for k in ("objectId", "externalId", "objectTypes", "coreTypes") if k in data]
+    if not keys:
+        raise MissingFieldError("Discover without objectId, externalId, objectTypes or coreTypes")
+    identity = obstacles = False
+    if "objectId" in data:
+        if not _is_uuid(data["objectId"]):
+            raise WrongTypeError("Discover objectId %s is not a UUID" % _short(data["objectId"]))
+        identity = data["objectId"].lower() == identity_id
+    if "externalId" in data and not isinstance(data["externalId"], str):
+        raise WrongTypeError("Discover externalId %s is not a string" % _short(data["externalId"]))
+    for key in ("objectTypes", "coreTypes"):
+        if key in data:
+            value = data[key]
+            if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+                raise WrongTypeError("Discover %s %s is not a non-empty list of strings" % (key, _short(value)))
+    if "objectTypes" in data and "coreTypes" in data:
+        raise InvalidPayloadError("Discover with both objectTypes and coreTypes")
+    object_types = data.get("objectTypes", [])
+    core_types = data.get("coreTypes", [])
+    if "objectId" not in data and "externalId" not in data:
+        identity = IDENTITY_OBJECT_TYPE in object_types or IDENTITY_CORE_TYPE in core_types
+        obstacles = object_type in object_types
+    return DiscoverRequest(identity=identity, obstacles=obstacles)
+
+
+@dataclass(frozen=True)
+class ResolveContent:
+    """The obstacles found in a Resolve, and the errors of the objects that were bad."""
+    obstacles: Tuple[ObstacleUpdate, ...]
+    errors: Tuple[CoatyError, ...] = field(default=())
+
+
+def decode_resolve(data, object_type, limits=CodecLimits()):
+    """Resolve payload dict -> ResolveContent. Objects of other types are ignored;
+    each bad obstacle object is reported in ``errors`` without losing the good ones."""
+    objects = []
+    if "object" in data:
+        objects.append(data["object"])
+    if "relatedObjects" in data:
+        related = data["relatedObjects"]
+        if not isinstance(related, list):
+            raise WrongTypeError("Resolve relatedObjects %s is not a list" % _short(related))
+        objects.extend(related)
+    if not objects:
+        raise MissingFieldError("Resolve without object or relatedObjects")
+    if "privateData" in data and not isinstance(data["privateData"], dict):
+        raise WrongTypeError("privateData %s is not an object" % _short(data["privateData"]))
+    found, errors = [], []
+    for obj in objects:
+        if not isinstance(obj, dict):
+            errors.append(WrongTypeError("Resolve object %s is not a JSON object" % _short(obj)))
+            continue
+        if obj.get("objectType") != object_type:
+            continue
+        try:
+            found.append(obstacle_from_object(obj, object_type, limits))
+        except (CoatyError, ValueError) as err:
+            errors.append(err if isinstance(err, CoatyError) else InvalidPayloadError(str(err)))
+    return ResolveContent(tuple(found), tuple(errors))
+
+
+def decode_advertise(data, object_type, limits=CodecLimits()):
+    """Advertise payload dict (ADV::<object_type>) -> ObstacleUpdate."""
+    if "privateData" in data and not isinstance(data["privateData"], dict):
+        raise WrongTypeError("privateData %s is not an object" % _short(data["privateData"]))
+    return obstacle_from_object(_get(data, "object"), object_type, limits)

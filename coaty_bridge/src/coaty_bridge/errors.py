@@ -1,0 +1,67 @@
+"""Exception tree of coaty_bridge. Every error carries a short ``reason`` used as
+the name of its drop counter on /diagnostics."""
+
+
+class CoatyError(Exception):
+    """Base of everything coaty_bridge raises on bad input."""
+    reason = "invalid"
+
+
+class InvalidTopicError(CoatyError, ValueError):
+    """The MQTT topic is not a Coaty topic we can use."""
+    reason = "invalid_topic"
+
+
+class ProtocolVersionError(InvalidTopicError):
+    """A Coaty topic of another protocol version than 3."""
+    reason = "wrong_protocol_version"
+
+
+class InvalidNameError(InvalidTopicError):
+    """A Coaty name (namespace, objectType, channel id, robot) with NUL, '/', '+' or '#'."""
+    reason = "invalid_name"
+
+
+class InvalidSourceIdError(InvalidTopicError):
+    """A sourceId or correlationId that is not a UUID."""
+    reason = "invalid_source_id"
+
+
+class InvalidPayloadError(CoatyError, ValueError):
+    """The payload is not a valid event of the kind its topic announces."""
+    reason = "invalid_payload"
+
+
+class PayloadTooLargeError(InvalidPayloadError):
+    """The payload is longer than the configured limit."""
+    reason = "oversized"
+
+
+class InvalidJsonError(InvalidPayloadError):
+    """The payload is not UTF-8 JSON."""
+    reason = "invalid_json"
+
+
+class NonFiniteNumberError(InvalidPayloadError):
+    """The payload contains NaN or Infinity (not JSON, and Coaty JS rejects it)."""
+    reason = "non_finite_number"
+
+
+class MissingFieldError(InvalidPayloadError):
+    """A required field is absent."""
+    reason = "missing_field"
+
+
+class WrongTypeError(InvalidPayloadError):
+    """A field has the wrong JSON type."""
+    reason = "wrong_type"
+
+
+class OutOfRangeError(InvalidPayloadError):
+    """A field has the right type but an impossible value (index outside the grid, ...)."""
+    reason = "out_of_range"
+
+
+class TooManyIndexesError(InvalidPayloadError):
+    """An index array is longer than the grid or the configured maximum."""
+    reason = "too_many_indexes"

@@ -1,0 +1,205 @@
+"""rospy node ``coaty_bridge``: wires the robot's topics to one Coaty agent.
+
+    to_fleet (SharedObstacle)               -> Advertise to the fleet
+    fleet (Advertise / Resolve)             -> from_fleet (SharedObstacle)
+    shared_obstacle_list (SharedObstacleArray, latched) -> answers to obstacle Discovers
+    /diagnostics                            <- counters, once a second
+"""
+import logging
+import sys
+import threading
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+
+from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge.codec import ObstacleUpdate
+from coaty_bridge.errors import CoatyError
+
+LOG = logging.getLogger(__name__)
+
+# private parameter -> BridgeConfig field default; the types are checked by BridgeConfig
+_PARAMS = ("broker_url", "namespace", "object_type", "identity_id", "tls_ca", "tls_cert",
+           "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
+           "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
+           "reconnect_max_delay", "discover_window")
+
+
+def msg_to_update(msg):
+    """SharedObstacle -> ObstacleUpdate (ValueError naming the bad field)."""
+    return ObstacleUpdate(
+        uuid=msg.uuid, source=msg.source, version=int(msg.version),
+        stamp=msg.header.stamp.to_sec(), frame_id=msg.header.frame_id, deadline=int(msg.deadline),
+        rectangle=tuple(float(v) for v in msg.rectangle_shape), resolution=float(msg.resolution),
+        origin_x=float(msg.origin_x), origin_y=float(msg.origin_y),
+        size_x=int(msg.size_x), size_y=int(msg.size_y),
+        marked=tuple(int(v) for v in msg.marked_indexes),
+        cleared=tuple(int(v) for v in msg.cleared_indexes))
+
+
+def update_to_msg(update):
+    """ObstacleUpdate -> SharedObstacle, casting every number to the field's type."""
+    msg = SharedObstacle()
+    msg.header.stamp = rospy.Time.from_sec(float(update.stamp))
+    msg.header.frame_id = update.frame_id
+    msg.uuid = update.uuid
+    msg.marked_indexes = [int(v) for v in update.marked]
+    msg.cleared_indexes = [int(v) for v in update.cleared]
+    msg.deadline = int(update.deadline)
+    msg.rectangle_shape = [float(v) for v in update.rectangle]
+    msg.source = update.source
+    msg.resolution = float(update.resolution)
+    msg.origin_x = float(update.origin_x)
+    msg.origin_y = float(update.origin_y)
+    msg.size_x = int(update.size_x)
+    msg.size_y = int(update.size_y)
+    msg.version = int(update.version)
+    return msg
+
+
+class RosoutHandler(logging.Handler):
+    """Sends the pure modules' log records to rosout."""
+
+    def emit(self, record):
+        text = self.format(record)
+        if record.levelno >= logging.ERROR:
+            rospy.logerr(text)
+        elif record.levelno >= logging.WARNING:
+            rospy.logwarn(text)
+        elif record.levelno >= logging.INFO:
+            rospy.loginfo(text)
+        else:
+            rospy.logdebug(text)
+
+
+def default_robot_name():
+    return rospy.get_namespace().strip("/").replace("/", "_")
+
+
+def read_config():
+    """Reads the private parameters into a BridgeConfig; ValueError names a bad one."""
+    kwargs = {}
+    for name in _PARAMS:
+        if rospy.has_param("~" + name):
+            kwargs[name] = rospy.get_param("~" + name)
+    url_param = rospy.get_param("~broker_url_param", "")
+    if url_param and "broker_url" not in kwargs:
+        kwargs["broker_url"] = wait_for_param(url_param, rospy.get_param("~broker_wait", 30.0))
+    robot_name = rospy.get_param("~robot_name", "") or default_robot_name()
+    if not robot_name:
+        raise ValueError("parameter robot_name = '': not set and the node runs in the root "
+                         "namespace; run it as robot_N/coaty_bridge or set ~robot_name")
+    return BridgeConfig(robot_name=robot_name, **kwargs)
+
+
+def wait_for_param(name, timeout):
+    """Waits up to ``timeout`` s for a parameter another node (run_broker) sets."""
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or timeout < 0:
+        raise ValueError("parameter broker_wait = %r: must be a number of seconds >= 0" % (timeout,))
+    deadline = rospy.get_time() + timeout
+    while not rospy.is_shutdown():
+        if rospy.has_param(name):
+            return rospy.get_param(name)
+        if rospy.get_time() >= deadline:
+            raise ValueError("parameter broker_url_param = %r: not set within %.0f s (is run_broker "
+                             "running?)" % (name, timeout))
+        rospy.sleep(0.1)
+    raise ValueError("shut down while waiting for %s" % name)
+
+
+class BridgeNode:
+    """Callbacks only convert and hand over; the logic lives in CoatyBridgeClient."""
+
+    def __init__(self, config):
+        self.config = config
+        self._lock = threading.Lock()
+        self._counters = {}
+        self.from_fleet = rospy.Publisher("from_fleet", SharedObstacle, queue_size=100)
+        self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        self.client = CoatyBridgeClient(config, self._on_fleet_obstacle)
+        rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
+        rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self._on_obstacle_list, queue_size=2)
+        self._timer = rospy.Timer(rospy.Duration(1.0), self._publish_diagnostics)
+
+    def start(self):
+        self.client.start()
+        rospy.loginfo("%s: coaty_bridge agent %s, broker %s, namespace %s, objectType %s",
+                      self.config.robot_name, self.client.identity_id, self.config.broker_url,
+                      self.config.namespace, self.config.object_type)
+
+    def shutdown(self):
+        self._timer.shutdown()
+        self.client.stop()
+
+    def _count(self, key):
+        with self._lock:
+            self._counters[key] = self._counters.get(key, 0) + 1
+
+    def _on_fleet_obstacle(self, update, topic):
+        self.from_fleet.publish(update_to_msg(update))
+
+    def _on_to_fleet(self, msg):
+        try:
+            update = msg_to_update(msg)
+        except ValueError as err:
+            reason = err.reason if isinstance(err, CoatyError) else "invalid"
+            self._count("dropped_to_fleet." + reason)
+            rospy.logwarn("%s: to_fleet obstacle %r v%s not published: %s", self.config.robot_name,
+                          msg.uuid[:40], msg.version, err)
+            return
+        if update.source != self.config.robot_name:
+            # Only this robot's own updates go out: re-publishing an external one echoes n(n-1) times.
+            self._count("dropped_to_fleet.foreign_source")
+            rospy.logwarn("%s: to_fleet obstacle %s v%d has source %r, not this robot; not re-published",
+                          self.config.robot_name, update.uuid, update.version, update.source)
+            return
+        self.client.publish_obstacle(update)
+
+    def _on_obstacle_list(self, msg):
+        updates = []
+        for item in msg.obstacles:
+            try:
+                updates.append(msg_to_update(item))
+            except ValueError as err:
+                self._count("dropped_list_item")
+                rospy.logwarn("%s: shared_obstacle_list item %r skipped: %s", self.config.robot_name,
+                              item.uuid[:40], err)
+        self.client.set_current_obstacles(updates)
+
+    def _publish_diagnostics(self, _event=None):
+        counters = self.client.counters()
+        with self._lock:
+            counters.update(self._counters)
+        status = DiagnosticStatus()
+        status.name = "coaty_bridge: %s" % self.config.robot_name
+        status.hardware_id = self.client.identity_id
+        if self.client.connected:
+            status.level = DiagnosticStatus.OK
+            status.message = "connected to %s" % self.config.broker_url
+        else:
+            status.level = DiagnosticStatus.WARN
+            status.message = "not connected to %s" % self.config.broker_url
+        status.values = [KeyValue(key, str(value)) for key, value in sorted(counters.items())]
+        array = DiagnosticArray()
+        array.header.stamp = rospy.Time.now()
+        array.status = [status]
+        self.diagnostics.publish(array)
+
+
+def main():
+    rospy.init_node("coaty_bridge")
+    handler = RosoutHandler()
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    package_logger = logging.getLogger("coaty_bridge")
+    package_logger.addHandler(handler)
+    package_logger.setLevel(logging.INFO)
+    try:
+        config = read_config()
+    except ValueError as err:
+        rospy.logfatal("coaty_bridge: bad parameter: %s", err)
+        sys.exit(2)
+    node = BridgeNode(config)
+    rospy.on_shutdown(node.shutdown)
+    node.start()
+    rospy.spin()
