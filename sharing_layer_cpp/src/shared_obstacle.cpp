@@ -1,0 +1,98 @@
+#include "sharing_layer/shared_obstacle.h"
+
+#include <algorithm>
+
+namespace sharing_layer
+{
+std::uint32_t VersionedCellSet::sourceId(const std::string& source)
+{
+  for (std::uint32_t i = 0; i < sources_.size(); ++i)
+  {
+    if (sources_[i] == source)
+    {
+      return i;
+    }
+  }
+  sources_.push_back(source);
+  return static_cast<std::uint32_t>(sources_.size() - 1);
+}
+
+bool VersionedCellSet::newer(const CellState& cell, std::uint64_t version, std::uint32_t source,
+                             bool or_equal) const
+{
+  if (version != cell.version)
+  {
+    return version > cell.version;
+  }
+  const int order = sources_[source].compare(sources_[cell.source]);
+  return order > 0 || (or_equal && order == 0);
+}
+
+std::size_t VersionedCellSet::apply(const std::vector<std::uint32_t>& marked,
+                                    const std::vector<std::uint32_t>& cleared, std::uint64_t version,
+                                    const std::string& source)
+{
+  const std::uint32_t source_id = sourceId(source);
+  std::size_t changed = 0;
+  for (std::uint32_t index : marked)
+  {
+    auto found = cells_.find(index);
+    if (found == cells_.end())
+    {
+      cells_.emplace(index, CellState{ version, source_id, true });
+      ++present_count_;
+      ++changed;
+    }
+    else if (newer(found->second, version, source_id, false))
+    {
+      if (!found->second.present)
+      {
+        ++present_count_;
+        ++changed;
+      }
+      found->second = CellState{ version, source_id, true };
+    }
+  }
+  for (std::uint32_t index : cleared)
+  {
+    auto found = cells_.find(index);
+    if (found == cells_.end())
+    {
+      // A tombstone, so an older mark that arrives later cannot bring the cell back.
+      cells_.emplace(index, CellState{ version, source_id, false });
+    }
+    else if (newer(found->second, version, source_id, true))
+    {
+      if (found->second.present)
+      {
+        --present_count_;
+        ++changed;
+      }
+      found->second = CellState{ version, source_id, false };
+    }
+  }
+  return changed;
+}
+
+bool VersionedCellSet::isPresent(std::uint32_t index) const
+{
+  const auto found = cells_.find(index);
+  return found != cells_.end() && found->second.present;
+}
+
+std::vector<std::uint32_t> VersionedCellSet::present() const
+{
+  std::vector<std::uint32_t> cells;
+  cells.reserve(present_count_);
+  for (const auto& entry : cells_)
+  {
+    if (entry.second.present)
+    {
+      cells.push_back(entry.first);
+    }
+  }
+  std::sort(cells.begin(), cells.end());
+  return cells;
+}
+
+}  // namespace sharing_layer

@@ -1,0 +1,1 @@
+"""Python face of the sharing layer's C++ core (see core.py)."""
