@@ -1,0 +1,7 @@
+from setuptools import setup
+from catkin_pkg.python_setup import generate_distutils_setup
+
+setup(**generate_distutils_setup(
+    packages=["fleet_sim", "fleet_sim.world"],
+    package_dir={"": "src"},
+))
