@@ -27,7 +27,7 @@ def make_update():
         values = dict(uuid=str(uuidlib.uuid4()), source="robot_0", version=1, stamp=1700000000.5,
                       frame_id="map", deadline=60, rectangle=(1.0, 2.0, 3.5, 4.0), resolution=0.05,
                       origin_x=-10.0, origin_y=-20.0, size_x=2000, size_y=2000,
-                      marked=(4001000, 4001001, 4003002), cleared=(4000999,))
+                      marked=(2001000, 2001001, 2003002), cleared=(2000999,))
         values.update(fields)
         return ObstacleUpdate(**values)
     return make
@@ -72,3 +72,51 @@ def make_client(broker):
     yield make
     for client in clients:
         client.stop(timeout=0.5)
+
+
+class Observer:
+    """A plain paho client that records every message on the broker and can publish."""
+
+    def __init__(self, url):
+        import paho.mqtt.client as mqtt
+        from coaty_bridge.client import _make_paho_client, parse_broker_url
+        address = parse_broker_url(url)
+        self.messages = []
+        self._client = _make_paho_client("observer-" + uuidlib.uuid4().hex[:8])
+        self._client.on_message = lambda c, u, m: self.messages.append((m.topic, bytes(m.payload)))
+        subscribed = []
+        self._client.on_subscribe = lambda *a: subscribed.append(True)
+        self._client.connect(address.host, address.port)
+        self._client.subscribe("#")
+        self._client.loop_start()
+        deadline = time.monotonic() + 5
+        while not subscribed and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert subscribed, "observer could not subscribe"
+        self._mqtt = mqtt
+
+    def publish(self, topic, payload):
+        self._client.publish(topic, payload).wait_for_publish(2)
+
+    def on(self, fragment):
+        """(topic, decoded JSON) of every message whose topic contains ``fragment``."""
+        import json
+        found = []
+        for topic, payload in list(self.messages):
+            if fragment in topic:
+                try:
+                    found.append((topic, json.loads(payload)))
+                except ValueError:
+                    found.append((topic, payload))
+        return found
+
+    def close(self):
+        self._client.disconnect()
+        self._client.loop_stop()
+
+
+@pytest.fixture
+def observer(broker):
+    obs = Observer(broker.url)
+    yield obs
+    obs.close()

@@ -149,6 +149,7 @@ class CoatyBridgeClient:
         self._connected = False
         self._ever_connected = False
         self._stopping = False
+        self._killed = False
         ns = config.namespace
         self._identity = codec.identity_object(self.identity_id, config.robot_name)
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
@@ -182,6 +183,8 @@ class CoatyBridgeClient:
     def stop(self, timeout=2.0):
         """Deadvertises the Identity explicitly (a clean disconnect discards the will),
         then disconnects and stops the MQTT thread."""
+        if self._killed:
+            return
         self._stopping = True
         if self._connected:
             try:
@@ -195,7 +198,7 @@ class CoatyBridgeClient:
     def kill(self):
         """Drops the connection without a Deadvertise, as a crash would (tests only):
         the broker then publishes the last will."""
-        self._stopping = True
+        self._stopping = self._killed = True
         sock = self._mqtt.socket()
         self._mqtt.loop_stop()
         if sock is not None:
@@ -367,6 +370,7 @@ class CoatyBridgeClient:
     def _answer_discover(self, topic, request):
         ns = self.config.namespace
         reply = str(Topic(ns, "RSV", self.identity_id, correlation_id=topic.correlation_id))
+        self._count("discovers_answered")
         if request.identity:
             self._send(reply, codec.resolve_payload(self._identity), queue=False)
             self._count("resolves_sent")
@@ -381,5 +385,3 @@ class CoatyBridgeClient:
                     self._count("resolves_sent")
                 else:
                     self._count("dropped_outgoing.oversized")
-        if not request.identity and not request.obstacles:
-            self._count("ignored")
