@@ -1,0 +1,1 @@
+"""Fleet obstacle sharing: the SharingHandler (pure logic in ``logic``, rospy node in ``node``)."""

@@ -1,0 +1,438 @@
+"""The SharingHandler: each robot's decision point for shared obstacles (DESIGN.md §5.5-§5.11).
+
+Pure Python: no rospy, no MQTT. The clock and the three outputs are injected, so the same
+object runs in the node, in tests and in an offline bag replay.
+
+Convergence (DESIGN.md §6): every obstacle keeps, per cell, the stamp (version, source) of the
+update that last set it and whether the cell is present. An update with stamp S marks each of
+its marked cells whose stamp is < S, then clears each of its cleared cells whose stamp is <= S
+(so on an exact tie, absent wins). The end state of a cell is decided by the greatest stamp that
+touched it, whatever the order the updates came in, and applying an update twice changes
+nothing. The obstacle's metadata (rectangle, deadline, first source) comes from the message
+with the smallest stamp seen for its uuid (the first share, version 1, once it has arrived),
+and its version is the greatest seen. Both are order-independent as well.
+"""
+import logging
+import math
+import uuid as uuidlib
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
+from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_indexes,
+                                           check_uuid)
+
+_log = logging.getLogger(__name__)
+
+#: Why a message can be dropped; each has a counter "dropped_<reason>".
+DROP_REASONS = (
+    "malformed",            # structurally wrong (rectangle length, bad uuid text, empty source, ...)
+    "empty_uuid",           # an update or fleet message without uuid
+    "bad_version",          # a fleet message with version 0 (a proposal has no business there)
+    "zero_deadline",        # a fleet message that would expire on arrival
+    "non_finite_rectangle",
+    "bad_geometry",         # resolution <= 0, NaN origin, zero size, ...
+    "geometry_mismatch",    # a valid grid, but not ours
+    "no_geometry",          # no grid known yet and the waiting queue is full
+    "too_many_cells",       # more than max_cells_per_message indexes
+    "index_out_of_range",
+    "own_source",           # a fleet message claiming to come from this robot
+    "expired",              # a message for an obstacle that expired here (tombstone)
+    "unknown_uuid",         # an internal update for an obstacle the handler does not hold
+    "empty_proposal",       # a proposal without marked cells
+)
+
+#: Counters besides the drops.
+EVENT_COUNTERS = ("proposals", "authorised", "redundant", "manual", "updates_in", "updates_out",
+                  "restamped", "expired", "deferred")
+
+
+@dataclass(frozen=True)
+class HeldObstacle:
+    """An obstacle as a handler holds it (one entry of the debug list)."""
+
+    uuid: str
+    source: str            # the robot that first shared it
+    version: int           # the greatest version seen
+    deadline: int          # seconds after local arrival
+    rectangle: Rectangle
+    geometry: Geometry
+    frame_id: str
+    cells: Tuple[int, ...]  # present cells, sorted
+    arrival: float         # local arrival time (clock seconds)
+    remaining: float       # seconds left at the time of the listing
+
+    def to_obstacle(self):
+        """Full-state message: cells marked, nothing cleared, deadline = remaining seconds
+        rounded up (at least 1)."""
+        return Obstacle(uuid=self.uuid, marked=self.cells, cleared=(),
+                        deadline=max(1, int(math.ceil(self.remaining))), rectangle=self.rectangle,
+                        source=self.source, geometry=self.geometry, version=self.version,
+                        frame_id=self.frame_id)
+
+
+def _meta_key(obstacle):
+    """Orders the messages of one uuid to pick the one that defines the metadata: the smallest
+    stamp (version, source), then the smallest metadata for exact stamp ties."""
+    return (obstacle.version, obstacle.source, tuple(obstacle.rectangle.as_list()),
+            obstacle.deadline, obstacle.frame_id)
+
+
+class _Entry:
+    """Mutable state of one held obstacle."""
+
+    __slots__ = ("uuid", "source", "rectangle", "deadline", "geometry", "frame_id", "arrival",
+                 "first_key", "max_version", "stamps", "present", "sorted_cells")
+
+    def __init__(self, obstacle, arrival):
+        self.uuid = obstacle.uuid
+        self.source = obstacle.source
+        self.rectangle = obstacle.rectangle
+        self.deadline = obstacle.deadline
+        self.geometry = obstacle.geometry
+        self.frame_id = obstacle.frame_id
+        self.arrival = arrival
+        self.first_key = _meta_key(obstacle)
+        self.max_version = obstacle.version
+        self.stamps = {}          # cell -> (version, source) of the update that last set it
+        self.present = set()      # cells currently marked
+        self.sorted_cells = ()    # cache of sorted(present); None when stale
+
+    def apply(self, obstacle):
+        """Applies one update by the stamp rule; returns True when anything visible changed."""
+        stamp = obstacle.stamp_key
+        stamps, present = self.stamps, self.present
+        get = stamps.get
+        before = len(present)
+        for cell in obstacle.marked:
+            old = get(cell)
+            if old is None or stamp > old:
+                stamps[cell] = stamp
+                present.add(cell)
+        changed = len(present) != before
+        for cell in obstacle.cleared:
+            old = get(cell)
+            if old is None or stamp >= old:
+                stamps[cell] = stamp
+                if cell in present:
+                    present.discard(cell)
+                    changed = True
+        if obstacle.version > self.max_version:
+            self.max_version = obstacle.version
+            changed = True
+        if stamp <= self.first_key[:2] and _meta_key(obstacle) < self.first_key:
+            # The earliest share defines the metadata, so all robots agree on it; two messages
+            # with the same stamp (only a faulty peer sends them) are ordered by their metadata.
+            self.first_key = _meta_key(obstacle)
+            self.source = obstacle.source
+            self.rectangle = obstacle.rectangle
+            self.deadline = obstacle.deadline
+            self.frame_id = obstacle.frame_id
+            changed = True
+        if changed:
+            self.sorted_cells = None
+        return changed
+
+    def cells(self):
+        if self.sorted_cells is None:
+            self.sorted_cells = tuple(sorted(self.present))
+        return self.sorted_cells
+
+
+def _noop(*_args):
+    pass
+
+
+class SharingHandler:
+    """Decides which proposals become fleet obstacles, which updates go out, what expires.
+
+    Not thread-safe: call it from one thread (the node holds a lock around every call).
+
+    Args:
+        robot_name: this robot; the source of what it authorises.
+        clock: callable returning the current time in seconds.
+        obstacle_duration: seconds an authorised obstacle lives (its deadline), rounded up.
+        on_to_layer(Obstacle): authorised proposals and applied external messages.
+        on_to_fleet(Obstacle): authorised obstacles and internal updates.
+        on_expired(str): uuid of an obstacle that expired here.
+        geometry: this robot's grid, or None until known (see set_geometry).
+        on_change(): called after the held list changed (add, cells, version, expiry).
+        max_cells_per_message: a message with more indexes is dropped.
+        uuid_factory: callable returning a new uuid string (default: lower-case uuid4).
+        max_deferred: fleet messages kept while no grid is known.
+    """
+
+    def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
+                 geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
+                 max_deferred=10000):
+        if not robot_name or not isinstance(robot_name, str):
+            raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
+        if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
+                and obstacle_duration > 0):
+            raise ValueError("obstacle_duration %r must be a positive number" % (obstacle_duration,))
+        if geometry is not None and not isinstance(geometry, Geometry):
+            raise ValueError("geometry %r is not a Geometry" % (geometry,))
+        self.robot_name = robot_name
+        self._clock = clock
+        self._deadline = int(math.ceil(obstacle_duration))
+        self._to_layer = on_to_layer
+        self._to_fleet = on_to_fleet
+        self._expired_out = on_expired
+        self._on_change = on_change or _noop
+        self._geometry = geometry
+        self._max_cells = max_cells_per_message
+        self._new_uuid = uuid_factory or (lambda: str(uuidlib.uuid4()))
+        self._max_deferred = max_deferred
+        self._entries = {}      # uuid -> _Entry
+        self._tombstones = {}   # uuid -> time until which messages for it are dropped
+        self._deferred = []     # fleet messages waiting for a grid
+        self._counters = dict.fromkeys(EVENT_COUNTERS + tuple("dropped_" + r for r in DROP_REASONS), 0)
+
+    # ----------------------------------------------------------------- queries
+
+    @property
+    def geometry(self):
+        return self._geometry
+
+    @property
+    def counters(self):
+        """A copy of all counters (events and dropped_<reason>)."""
+        return dict(self._counters)
+
+    def __len__(self):
+        return len(self._entries)
+
+    def __contains__(self, uuid):
+        return uuid in self._entries
+
+    def obstacles(self):
+        """The held obstacles, sorted by uuid."""
+        now = self._clock()
+        return [self._held(self._entries[u], now) for u in sorted(self._entries)]
+
+    def get(self, uuid):
+        """The held obstacle `uuid`, or None."""
+        entry = self._entries.get(uuid)
+        return None if entry is None else self._held(entry, self._clock())
+
+    def is_tombstoned(self, uuid):
+        return uuid in self._tombstones
+
+    # ----------------------------------------------------------------- inputs
+
+    def set_geometry(self, geometry):
+        """Sets this robot's grid (from the map). Fleet messages that waited for it are replayed."""
+        if not isinstance(geometry, Geometry):
+            raise ValueError("geometry %r is not a Geometry" % (geometry,))
+        if self._geometry is not None and not self._geometry.matches(geometry):
+            _log.warning("%s: grid changed from %s to %s; obstacles already held keep their grid",
+                         self.robot_name, self._geometry, geometry)
+        self._geometry = geometry
+        deferred, self._deferred = self._deferred, []
+        for obstacle in deferred:
+            self.on_external(obstacle)
+
+    def on_proposal(self, obstacle):
+        """A new obstacle proposed by the layer. Returns the authorised Obstacle, or None when it
+        was redundant or invalid."""
+        self._counters["proposals"] += 1
+        try:
+            if obstacle.uuid:
+                raise InvalidMessageError("malformed", "proposal already has uuid %r" % obstacle.uuid)
+            if not obstacle.marked:
+                raise InvalidMessageError("empty_proposal", "no marked cells in %s" % obstacle.rectangle)
+            if self._geometry is None:
+                _log.info("%s: no map yet; taking the grid of the first proposal: %s",
+                          self.robot_name, obstacle.geometry)
+                self.set_geometry(obstacle.geometry)
+            self._check_grid(obstacle)
+        except InvalidMessageError as err:
+            self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
+            return None
+        other = self._overlapping(obstacle.rectangle)
+        if other is not None:
+            self._counters["redundant"] += 1
+            _log.debug("%s: proposal %s overlaps obstacle %s %s, already monitored: not new, dropped",
+                       self.robot_name, obstacle.rectangle, other.uuid, other.rectangle)
+            return None
+        return self._authorise(obstacle, self._deadline)
+
+    def on_internal_update(self, obstacle):
+        """An update of a held obstacle by this robot's layer: sent to the fleet, then applied.
+        Returns the Obstacle sent, or None when dropped."""
+        try:
+            check_uuid(obstacle.uuid)
+            if obstacle.uuid in self._tombstones:
+                raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+            entry = self._entries.get(obstacle.uuid)
+            if entry is None:
+                raise InvalidMessageError("unknown_uuid", "internal update for %s, which this "
+                                          "handler does not hold" % obstacle.uuid)
+            if self._geometry is None:
+                raise InvalidMessageError("no_geometry", "no grid known yet")
+            self._check_grid(obstacle)
+        except InvalidMessageError as err:
+            self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
+            return None
+        changes = {}
+        if obstacle.version <= entry.max_version:
+            changes["version"] = entry.max_version + 1
+            self._counters["restamped"] += 1
+            _log.debug("%s: internal update of %s has version %d <= %d seen; re-stamped %d",
+                       self.robot_name, obstacle.uuid, obstacle.version, entry.max_version,
+                       entry.max_version + 1)
+        if obstacle.source != self.robot_name:
+            _log.debug("%s: internal update of %s claims source %r; set to own name",
+                       self.robot_name, obstacle.uuid, obstacle.source)
+            changes["source"] = self.robot_name
+        # The rectangle and deadline never change after the first share (DESIGN.md §5.7).
+        if obstacle.rectangle != entry.rectangle:
+            changes["rectangle"] = entry.rectangle
+        if obstacle.deadline != entry.deadline:
+            changes["deadline"] = entry.deadline
+        if changes:
+            obstacle = obstacle.replace(**changes)
+        self._to_fleet(obstacle)
+        self._counters["updates_out"] += 1
+        if entry.apply(obstacle):
+            self._on_change()
+        return obstacle
+
+    def on_external(self, obstacle):
+        """A message from another robot (via the bridge): added or applied, passed to the layer,
+        never sent back out. Returns True when applied now; False when dropped or deferred
+        (waiting for a grid)."""
+        try:
+            self._check_external(obstacle)
+            if self._geometry is None:
+                if len(self._deferred) >= self._max_deferred:
+                    raise InvalidMessageError("no_geometry", "no grid known yet and %d messages "
+                                              "already waiting" % len(self._deferred))
+                self._deferred.append(obstacle)
+                self._counters["deferred"] += 1
+                _log.debug("%s: no grid yet; message %s v%d from %s waits for the map",
+                           self.robot_name, obstacle.uuid, obstacle.version, obstacle.source)
+                return False
+            self._check_grid(obstacle)
+        except InvalidMessageError as err:
+            self.reject(obstacle.source, obstacle.uuid, err)
+            return False
+        entry = self._entries.get(obstacle.uuid)
+        if entry is None:
+            entry = _Entry(obstacle, self._clock())
+            self._entries[obstacle.uuid] = entry
+            entry.apply(obstacle)
+            changed = True
+            _log.info("%s: added obstacle %s from %s (v%d, %d cells, deadline %d s)", self.robot_name,
+                      obstacle.uuid, obstacle.source, obstacle.version, len(entry.present),
+                      obstacle.deadline)
+        else:
+            changed = entry.apply(obstacle)
+        self._counters["updates_in"] += 1
+        self._to_layer(obstacle)
+        if changed:
+            self._on_change()
+        return True
+
+    def add_manual(self, rectangle, marked=(), deadline=0, frame_id=""):
+        """Adds an obstacle by hand and shares it like a detected one. `rectangle` is a Rectangle
+        or [min_x, min_y, max_x, max_y]; without `marked`, every cell whose centre lies in the
+        rectangle is marked; deadline 0 = obstacle_duration. Returns the authorised Obstacle;
+        raises InvalidRequestError saying why not."""
+        if self._geometry is None:
+            raise InvalidRequestError("no map grid known yet: cannot turn a rectangle into cells")
+        try:
+            if not isinstance(rectangle, Rectangle):
+                rectangle = Rectangle.from_sequence(rectangle)
+            marked = tuple(int(c) for c in marked) or self._geometry.cells_in(rectangle)
+            if not marked:
+                raise InvalidRequestError("rectangle %s covers no cell of the map (%s)"
+                                          % (rectangle, self._geometry))
+            obstacle = Obstacle(uuid="", marked=marked, cleared=(), deadline=0, rectangle=rectangle,
+                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id)
+            check_indexes(obstacle, self._geometry, self._max_cells)
+        except InvalidMessageError as err:
+            raise InvalidRequestError(str(err)) from err
+        other = self._overlapping(rectangle)
+        if other is not None:
+            raise InvalidRequestError("rectangle %s overlaps obstacle %s %s, already shared"
+                                      % (rectangle, other.uuid, other.rectangle))
+        self._counters["manual"] += 1
+        return self._authorise(obstacle, int(deadline) or self._deadline)
+
+    def expire(self):
+        """Removes every obstacle whose deadline has passed since its local arrival (no message
+        goes to the fleet; the layer is told). Returns the expired uuids, sorted."""
+        now = self._clock()
+        gone = sorted(u for u, e in self._entries.items() if now - e.arrival >= e.deadline)
+        for uuid in gone:
+            entry = self._entries.pop(uuid)
+            # Remember the uuid at least obstacle_duration more, so a late message cannot
+            # resurrect the obstacle on this robot only.
+            self._tombstones[uuid] = now + max(self._deadline, entry.deadline)
+            self._counters["expired"] += 1
+            _log.info("%s: obstacle %s expired (%d s after arrival at %.3f)", self.robot_name, uuid,
+                      entry.deadline, entry.arrival)
+            self._expired_out(uuid)
+        for uuid in [u for u, until in self._tombstones.items() if now >= until]:
+            del self._tombstones[uuid]
+        if gone:
+            self._on_change()
+        return gone
+
+    def reject(self, source, uuid, error):
+        """Drops a message: one log line naming the source robot and the reason, one counter."""
+        reason = error.reason if error.reason in DROP_REASONS else "malformed"
+        self._counters["dropped_" + reason] += 1
+        _log.warning("%s: dropped message from %r for obstacle %r: %s", self.robot_name,
+                     source, (uuid or "")[:80], error)
+
+    # ----------------------------------------------------------------- internals
+
+    def _authorise(self, obstacle, deadline):
+        shared = obstacle.replace(uuid=self._new_uuid(), version=1, source=self.robot_name,
+                                  deadline=deadline)
+        entry = _Entry(shared, self._clock())
+        self._entries[shared.uuid] = entry
+        entry.apply(shared)
+        self._counters["authorised"] += 1
+        _log.info("%s: authorised obstacle %s %s, %d cells, deadline %d s", self.robot_name,
+                  shared.uuid, shared.rectangle, len(entry.present), deadline)
+        self._to_layer(shared)
+        self._to_fleet(shared)
+        self._on_change()
+        return shared
+
+    def _overlapping(self, rectangle):
+        for uuid in sorted(self._entries):
+            entry = self._entries[uuid]
+            if entry.rectangle.overlaps(rectangle):
+                return entry
+        return None
+
+    def _check_external(self, obstacle):
+        if not obstacle.source:
+            raise InvalidMessageError("malformed", "empty source")
+        if obstacle.source == self.robot_name:
+            raise InvalidMessageError("own_source", "message claims to come from this robot")
+        check_uuid(obstacle.uuid)
+        if obstacle.version == 0:
+            raise InvalidMessageError("bad_version", "version 0 (a proposal) on the fleet channel")
+        if obstacle.deadline == 0:
+            raise InvalidMessageError("zero_deadline", "deadline 0")
+        if obstacle.uuid in self._tombstones:
+            raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+
+    def _check_grid(self, obstacle):
+        if not self._geometry.matches(obstacle.geometry):
+            raise InvalidMessageError("geometry_mismatch", "grid %s, ours is %s"
+                                      % (obstacle.geometry, self._geometry))
+        check_indexes(obstacle, self._geometry, self._max_cells)
+
+    @staticmethod
+    def _held(entry, now):
+        return HeldObstacle(uuid=entry.uuid, source=entry.source, version=entry.max_version,
+                            deadline=entry.deadline, rectangle=entry.rectangle,
+                            geometry=entry.geometry, frame_id=entry.frame_id, cells=entry.cells(),
+                            arrival=entry.arrival,
+                            remaining=entry.deadline - (now - entry.arrival))

@@ -1,0 +1,250 @@
+"""rospy node around the SharingHandler: message -> validated value -> logic -> message.
+
+Runs as robot_N/sharing_handler; every topic and service name is relative to the robot
+namespace except /diagnostics and the map topic. See the package README for the interface.
+"""
+import logging
+import sys
+import threading
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import OccupancyGrid
+from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs.srv import AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse
+from std_msgs.msg import String
+
+from sharing_handler_py import snapshot
+from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError, InvalidRequestError
+from sharing_handler_py.logic import SharingHandler
+from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
+
+
+class RosoutHandler(logging.Handler):
+    """Sends the pure modules' `logging` records to rosout at the matching level."""
+
+    _BY_LEVEL = ((logging.ERROR, rospy.logerr), (logging.WARNING, rospy.logwarn),
+                 (logging.INFO, rospy.loginfo), (logging.NOTSET, rospy.logdebug))
+
+    def emit(self, record):
+        try:
+            text = self.format(record)
+            for level, log in self._BY_LEVEL:
+                if record.levelno >= level:
+                    log(text)
+                    return
+        except Exception:  # noqa: BLE001 - a log line must never take the node down
+            self.handleError(record)
+
+
+def obstacle_from_msg(msg):
+    """SharedObstacle -> Obstacle; raises InvalidMessageError naming what is wrong."""
+    geometry = Geometry(float(msg.resolution), float(msg.origin_x), float(msg.origin_y),
+                        int(msg.size_x), int(msg.size_y))
+    return Obstacle(uuid=msg.uuid, marked=tuple(msg.marked_indexes),
+                    cleared=tuple(msg.cleared_indexes), deadline=int(msg.deadline),
+                    rectangle=Rectangle.from_sequence(msg.rectangle_shape), source=msg.source,
+                    geometry=geometry, version=int(msg.version), frame_id=msg.header.frame_id,
+                    stamp=msg.header.stamp.to_sec())
+
+
+def msg_from_obstacle(obstacle, stamp=None):
+    """Obstacle -> SharedObstacle (header stamp = the obstacle's, or `stamp` when given)."""
+    msg = SharedObstacle()
+    msg.header.frame_id = obstacle.frame_id
+    msg.header.stamp = stamp if stamp is not None else rospy.Time.from_sec(max(0.0, obstacle.stamp))
+    msg.uuid = obstacle.uuid
+    msg.marked_indexes = list(obstacle.marked)
+    msg.cleared_indexes = list(obstacle.cleared)
+    msg.deadline = obstacle.deadline
+    msg.rectangle_shape = obstacle.rectangle.as_list()
+    msg.source = obstacle.source
+    g = obstacle.geometry
+    msg.resolution, msg.origin_x, msg.origin_y = g.resolution, g.origin_x, g.origin_y
+    msg.size_x, msg.size_y = g.size_x, g.size_y
+    msg.version = obstacle.version
+    return msg
+
+
+def geometry_from_map(grid):
+    """OccupancyGrid -> Geometry; raises InvalidMessageError for an unusable map."""
+    q = grid.info.origin.orientation
+    if abs(q.x) > 1e-6 or abs(q.y) > 1e-6 or abs(q.z) > 1e-6:
+        raise InvalidMessageError("bad_geometry", "map origin is rotated (quaternion %.3g %.3g %.3g "
+                                  "%.3g); cell indexes assume an axis-aligned grid" % (q.x, q.y, q.z, q.w))
+    return Geometry(float(grid.info.resolution), float(grid.info.origin.position.x),
+                    float(grid.info.origin.position.y), int(grid.info.width), int(grid.info.height))
+
+
+def read_params():
+    """Reads and checks the private parameters; raises InvalidParameterError."""
+    default_name = rospy.get_namespace().strip("/").replace("/", "_")
+    return HandlerParams(
+        robot_name=rospy.get_param("~robot_name", default_name),
+        obstacle_duration=rospy.get_param("~obstacle_duration", 60.0),
+        expiry_rate=rospy.get_param("~expiry_rate", 1.0),
+        snapshot_file=rospy.get_param("~snapshot_file", ""),
+        max_cells_per_message=rospy.get_param("~max_cells_per_message", 100000),
+        map_topic=rospy.get_param("~map_topic", "/map"),
+    )
+
+
+class HandlerNode:
+    """Wires one SharingHandler to topics, services, the map and a timer."""
+
+    def __init__(self, params):
+        self.params = params
+        self._lock = threading.RLock()
+        self._changes = 0           # list changes since start (for the snapshot)
+        self._snapshot_written = -1
+        self._dropped_reported = 0
+        self._map_frame = ""
+        self._pub_layer = rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100)
+        self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
+        self._pub_fleet = rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000)
+        self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
+                                         latch=True)
+        self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        self.handler = SharingHandler(
+            params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
+            on_to_layer=lambda o: self._pub_layer.publish(msg_from_obstacle(o)),
+            on_to_fleet=lambda o: self._pub_fleet.publish(msg_from_obstacle(o)),
+            on_expired=lambda u: self._pub_expired.publish(String(data=u)),
+            on_change=self._publish_list,
+            max_cells_per_message=params.max_cells_per_message)
+        self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
+        rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
+        rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
+        rospy.Subscriber("obstacle_updates", SharedObstacle, self._on_update, queue_size=1000)
+        rospy.Subscriber("from_fleet", SharedObstacle, self._on_fleet, queue_size=1000)
+        rospy.Service("list_obstacles", ListObstacles, self._on_list)
+        rospy.Service("add_obstacle", AddObstacle, self._on_add)
+        self._timer = rospy.Timer(rospy.Duration(1.0 / params.expiry_rate), self._on_tick)
+        rospy.loginfo("%s: sharing handler up (obstacle_duration %g s, expiry %g Hz, map %s, "
+                      "snapshot %s)", params.robot_name, params.obstacle_duration, params.expiry_rate,
+                      params.map_topic, params.snapshot_file or "off")
+
+    # ------------------------------------------------------------ callbacks
+
+    def _convert(self, msg, topic):
+        try:
+            return obstacle_from_msg(msg)
+        except InvalidMessageError as err:
+            with self._lock:
+                self.handler.reject("%s (on %s)" % (msg.source or "?", topic), msg.uuid, err)
+            return None
+
+    def _on_proposal(self, msg):
+        obstacle = self._convert(msg, "obstacle_proposals")
+        if obstacle is not None:
+            with self._lock:
+                self.handler.on_proposal(obstacle)
+
+    def _on_update(self, msg):
+        obstacle = self._convert(msg, "obstacle_updates")
+        if obstacle is not None:
+            with self._lock:
+                self.handler.on_internal_update(obstacle)
+
+    def _on_fleet(self, msg):
+        obstacle = self._convert(msg, "from_fleet")
+        if obstacle is not None:
+            with self._lock:
+                self.handler.on_external(obstacle)
+
+    def _on_map(self, grid):
+        try:
+            geometry = geometry_from_map(grid)
+        except InvalidMessageError as err:
+            rospy.logerr("%s: ignoring map on %s: %s", self.params.robot_name, self.params.map_topic, err)
+            return
+        with self._lock:
+            self._map_frame = grid.header.frame_id
+            if self.handler.geometry is None or not self.handler.geometry.matches(geometry):
+                rospy.loginfo("%s: grid from %s: %s", self.params.robot_name, self.params.map_topic,
+                              geometry)
+                self.handler.set_geometry(geometry)
+
+    def _on_list(self, _request):
+        with self._lock:
+            held = self.handler.obstacles()
+        response = ListObstaclesResponse()
+        response.obstacles = [msg_from_obstacle(h.to_obstacle(), rospy.Time.now()) for h in held]
+        response.arrival_times = [h.arrival for h in held]
+        response.remaining_seconds = [h.remaining for h in held]
+        return response
+
+    def _on_add(self, request):
+        try:
+            with self._lock:
+                shared = self.handler.add_manual(list(request.rectangle_shape),
+                                                 tuple(request.marked_indexes), request.deadline,
+                                                 frame_id=self._map_frame)
+        except InvalidRequestError as err:
+            rospy.logwarn("%s: add_obstacle refused: %s", self.params.robot_name, err)
+            return AddObstacleResponse(success=False, message=str(err), uuid="")
+        return AddObstacleResponse(success=True, message="shared", uuid=shared.uuid)
+
+    def _on_tick(self, _event):
+        with self._lock:
+            self.handler.expire()
+            self._publish_diagnostics()
+            if self.params.snapshot_file and self._snapshot_written != self._changes:
+                self._write_snapshot()
+
+    # ------------------------------------------------------------ outputs
+
+    def _publish_list(self):
+        self._changes += 1
+        now = rospy.Time.now()
+        array = SharedObstacleArray()
+        array.header.stamp = now
+        array.header.frame_id = self._map_frame
+        array.obstacles = [msg_from_obstacle(h.to_obstacle(), now) for h in self.handler.obstacles()]
+        self._pub_list.publish(array)
+
+    def _publish_diagnostics(self):
+        counters = self.handler.counters
+        dropped = sum(v for k, v in counters.items() if k.startswith("dropped_"))
+        status = DiagnosticStatus(name="sharing_handler (%s)" % self.params.robot_name,
+                                  hardware_id=self.params.robot_name)
+        if dropped > self._dropped_reported:
+            status.level = DiagnosticStatus.WARN
+            status.message = "%d messages dropped since the last report" % (dropped - self._dropped_reported)
+        else:
+            status.level = DiagnosticStatus.OK
+            status.message = "%d obstacles held" % len(self.handler)
+        self._dropped_reported = dropped
+        status.values = [KeyValue(key="obstacles", value=str(len(self.handler))),
+                         KeyValue(key="grid", value=str(self.handler.geometry or "unknown")),
+                         KeyValue(key="dropped", value=str(dropped))]
+        status.values += [KeyValue(key=k, value=str(v)) for k, v in sorted(counters.items())]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = rospy.Time.now()
+        self._pub_diag.publish(array)
+
+    def _write_snapshot(self):
+        try:
+            text = snapshot.render(self.params.robot_name, rospy.get_time(), self.handler.obstacles())
+            snapshot.write_atomically(self.params.snapshot_file, text)
+            self._snapshot_written = self._changes
+        except (OSError, ValueError) as err:
+            rospy.logwarn_throttle(30, "%s: cannot write snapshot %s: %s" % (
+                self.params.robot_name, self.params.snapshot_file, err))
+
+
+def main(argv=None):
+    rospy.init_node("sharing_handler", argv=argv)
+    log = logging.getLogger("sharing_handler_py")
+    log.setLevel(logging.DEBUG)  # rospy's own level decides what is shown
+    log.addHandler(RosoutHandler())
+    log.propagate = False
+    try:
+        params = read_params()
+    except InvalidParameterError as err:
+        message = "sharing_handler: bad parameter %s" % err
+        rospy.logfatal(message)
+        print(message, file=sys.stderr)
+        sys.exit(2)
+    HandlerNode(params)
+    rospy.spin()

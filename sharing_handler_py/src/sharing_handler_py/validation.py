@@ -1,0 +1,225 @@
+"""Value types of the handler, validated on construction (no ROS in here).
+
+Every type is a frozen dataclass whose ``__post_init__`` raises a SharingError subclass that
+names the bad value, so an object that exists is well-formed. What depends on the receiving
+handler (its grid, its robot name, what it already holds) is checked in ``logic``.
+"""
+import math
+import re
+from dataclasses import dataclass, replace
+from typing import Tuple
+
+from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError
+
+#: Relative tolerance for comparing resolutions and origins of two grids.
+GEOMETRY_REL_TOL = 1e-6
+#: Longest uuid accepted from outside (uuid4 text is 36 characters).
+MAX_UUID_LENGTH = 64
+_UUID_CHARS = re.compile(r"^[A-Za-z0-9_.:-]+$")
+_MAX_INDEX = 2 ** 32  # indexes travel as uint32
+
+
+def _close(a, b, floor):
+    """True when a and b agree within GEOMETRY_REL_TOL relative, or within `floor` near zero."""
+    return abs(a - b) <= max(GEOMETRY_REL_TOL * max(abs(a), abs(b)), floor)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """The grid that cell indexes (y * size_x + x) refer to."""
+
+    resolution: float  # metres per cell
+    origin_x: float    # world x of the corner of cell (0, 0), metres
+    origin_y: float
+    size_x: int        # cells
+    size_y: int
+
+    def __post_init__(self):
+        if not (isinstance(self.resolution, (int, float)) and math.isfinite(self.resolution)
+                and self.resolution > 0):
+            raise InvalidMessageError("bad_geometry", "resolution %r is not a positive finite number"
+                                      % (self.resolution,))
+        for name in ("origin_x", "origin_y"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise InvalidMessageError("bad_geometry", "%s %r is not finite" % (name, value))
+        for name in ("size_x", "size_y"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise InvalidMessageError("bad_geometry", "%s %r is not a positive integer"
+                                          % (name, value))
+        if self.size_x * self.size_y > _MAX_INDEX:
+            raise InvalidMessageError("bad_geometry", "%d x %d cells do not fit uint32 indexes"
+                                      % (self.size_x, self.size_y))
+
+    @property
+    def cell_count(self):
+        return self.size_x * self.size_y
+
+    def matches(self, other):
+        """Same grid: sizes exact; resolution and origin within 1e-6 relative (for an origin
+        near zero, within a millionth of a cell)."""
+        floor = GEOMETRY_REL_TOL * self.resolution
+        return (self.size_x == other.size_x and self.size_y == other.size_y
+                and _close(self.resolution, other.resolution, 0.0)
+                and _close(self.origin_x, other.origin_x, floor)
+                and _close(self.origin_y, other.origin_y, floor))
+
+    def cells_in(self, rectangle):
+        """Indexes of the cells whose centre lies inside `rectangle` (closed), sorted."""
+        def span(lo, hi, origin, size):
+            first = max(0, math.ceil((lo - origin) / self.resolution - 0.5))
+            last = min(size - 1, math.floor((hi - origin) / self.resolution - 0.5))
+            return range(first, last + 1)
+        xs = span(rectangle.min_x, rectangle.max_x, self.origin_x, self.size_x)
+        return tuple(y * self.size_x + x
+                     for y in span(rectangle.min_y, rectangle.max_y, self.origin_y, self.size_y)
+                     for x in xs)
+
+    def __str__(self):
+        return "%gm/cell origin (%g, %g) %dx%d" % (self.resolution, self.origin_x, self.origin_y,
+                                                    self.size_x, self.size_y)
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """A monitored subsection [min_x, min_y, max_x, max_y] in metres."""
+
+    min_x: float
+    min_y: float
+    max_x: float
+    max_y: float
+
+    def __post_init__(self):
+        values = (self.min_x, self.min_y, self.max_x, self.max_y)
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+            raise InvalidMessageError("non_finite_rectangle", "rectangle %r" % (list(values),))
+        if self.min_x > self.max_x or self.min_y > self.max_y:
+            raise InvalidMessageError("malformed", "rectangle %r has min > max" % (list(values),))
+
+    @classmethod
+    def from_sequence(cls, values):
+        """[min_x, min_y, max_x, max_y] -> Rectangle; any other length is malformed."""
+        values = list(values)
+        if len(values) != 4:
+            raise InvalidMessageError("malformed", "rectangle_shape has %d values, expected 4: %r"
+                                      % (len(values), values[:8]))
+        return cls(*(float(v) for v in values))
+
+    def as_list(self):
+        return [self.min_x, self.min_y, self.max_x, self.max_y]
+
+    def overlaps(self, other):
+        """Positive-area intersection. Along an axis where either rectangle has zero extent,
+        touching counts (a degenerate rectangle on another's edge overlaps it)."""
+        def axis(a_lo, a_hi, b_lo, b_hi):
+            lo, hi = max(a_lo, b_lo), min(a_hi, b_hi)
+            return lo < hi or (lo == hi and (a_lo == a_hi or b_lo == b_hi))
+        return (axis(self.min_x, self.max_x, other.min_x, other.max_x)
+                and axis(self.min_y, self.max_y, other.min_y, other.max_y))
+
+    def __str__(self):
+        return "[%g, %g, %g, %g]" % (self.min_x, self.min_y, self.max_x, self.max_y)
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One message of the protocol as a plain value: a proposal (uuid ''), a first share
+    (version 1) or an update. Mirrors sharing_msgs/SharedObstacle."""
+
+    uuid: str
+    marked: Tuple[int, ...]
+    cleared: Tuple[int, ...]
+    deadline: int          # seconds the obstacle lives after local arrival
+    rectangle: Rectangle
+    source: str            # robot that made this update
+    geometry: Geometry
+    version: int = 0
+    frame_id: str = ""
+    stamp: float = 0.0     # header stamp, seconds
+
+    def __post_init__(self):
+        if not isinstance(self.marked, tuple):
+            object.__setattr__(self, "marked", tuple(self.marked))
+        if not isinstance(self.cleared, tuple):
+            object.__setattr__(self, "cleared", tuple(self.cleared))
+        if not isinstance(self.uuid, str) or not isinstance(self.source, str):
+            raise InvalidMessageError("malformed", "uuid %r / source %r are not strings"
+                                      % (self.uuid, self.source))
+        for name in ("deadline", "version"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise InvalidMessageError("malformed", "%s %r is not a non-negative integer"
+                                          % (name, value))
+        if not isinstance(self.rectangle, Rectangle) or not isinstance(self.geometry, Geometry):
+            raise InvalidMessageError("malformed", "rectangle/geometry of wrong type: %r, %r"
+                                      % (type(self.rectangle).__name__, type(self.geometry).__name__))
+
+    def replace(self, **changes):
+        return replace(self, **changes)
+
+    @property
+    def stamp_key(self):
+        """The (version, source) pair that orders updates of one obstacle."""
+        return (self.version, self.source)
+
+
+def check_uuid(uuid):
+    """Raises InvalidMessageError unless `uuid` is a plausible obstacle id."""
+    if not uuid:
+        raise InvalidMessageError("empty_uuid", "uuid is empty")
+    if len(uuid) > MAX_UUID_LENGTH or not _UUID_CHARS.match(uuid):
+        raise InvalidMessageError("malformed", "uuid %r is not an id (max %d chars of [A-Za-z0-9_.:-])"
+                                  % (uuid[:80], MAX_UUID_LENGTH))
+
+
+def check_indexes(obstacle, geometry, max_cells):
+    """Raises unless the message's cell count is <= max_cells and every index is on `geometry`."""
+    count = len(obstacle.marked) + len(obstacle.cleared)
+    if count > max_cells:
+        raise InvalidMessageError("too_many_cells", "%d cell indexes > max_cells_per_message %d"
+                                  % (count, max_cells))
+    limit = geometry.cell_count
+    for name, cells in (("marked_indexes", obstacle.marked), ("cleared_indexes", obstacle.cleared)):
+        if cells:
+            low, high = min(cells), max(cells)
+            if low < 0 or high >= limit:
+                bad = high if high >= limit else low
+                raise InvalidMessageError("index_out_of_range", "%s holds %d, grid has %d cells (%s)"
+                                          % (name, bad, limit, geometry))
+
+
+@dataclass(frozen=True)
+class HandlerParams:
+    """The node's parameters, checked at start-up. Field names are the private parameter names."""
+
+    robot_name: str
+    obstacle_duration: float = 60.0    # s, deadline given to authorised obstacles
+    expiry_rate: float = 1.0           # Hz, expiry check, diagnostics and snapshot
+    snapshot_file: str = ""            # YAML snapshot path; "" = off
+    max_cells_per_message: int = 100000
+    map_topic: str = "/map"
+
+    def __post_init__(self):
+        def bad(name, why):
+            raise InvalidParameterError("~%s = %r: %s" % (name, getattr(self, name), why))
+        if not isinstance(self.robot_name, str) or not self.robot_name.strip():
+            bad("robot_name", "must be a non-empty string (set it when the node runs outside a "
+                              "robot namespace)")
+        if "/" in self.robot_name:
+            bad("robot_name", "must not contain '/'")
+        for name in ("obstacle_duration", "expiry_rate"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                bad(name, "must be a finite number")
+        if not 1.0 <= self.obstacle_duration <= 2.0 ** 32 - 1:
+            bad("obstacle_duration", "must be in [1, 4294967295] seconds")
+        if not 0.0 < self.expiry_rate <= 1000.0:
+            bad("expiry_rate", "must be in (0, 1000] Hz")
+        if not isinstance(self.snapshot_file, str):
+            bad("snapshot_file", "must be a path string ('' = off)")
+        value = self.max_cells_per_message
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            bad("max_cells_per_message", "must be a positive integer")
+        if not isinstance(self.map_topic, str) or not self.map_topic:
+            bad("map_topic", "must be a non-empty topic name")

@@ -1,0 +1,279 @@
+#!/usr/bin/python3
+"""rostest: the sharing_handler node in robot_0, driven through fake layer and bridge topics.
+
+Every flow of DESIGN.md §5.5-§5.11 as the layer and the bridge see it, the bad-input drops on
+/diagnostics and /rosout, the services, the latched list, the YAML snapshot and a start-up
+failure on a bad parameter. The tests run in name order and build on each other's state.
+"""
+import math
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import OccupancyGrid
+from rosgraph_msgs.msg import Log
+from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs.srv import AddObstacle, ListObstacles
+from std_msgs.msg import String
+
+NS = "/robot_0/"
+RES, OX, OY, SX, SY = 0.05, -5.0, -2.5, 200, 100
+UUID4 = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-4[0-9a-f]{3}-[89ab][0-9a-f]{3}-[0-9a-f]{12}$")
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def obstacle(uuid="", marked=(), cleared=(), deadline=30, rect=(0.0, 0.0, 0.5, 0.5), source="robot_1",
+             version=1, grid=(RES, OX, OY, SX, SY)):
+    msg = SharedObstacle()
+    msg.header.frame_id = "map"
+    msg.header.stamp = rospy.Time.now()
+    msg.uuid = uuid
+    msg.marked_indexes = list(marked)
+    msg.cleared_indexes = list(cleared)
+    msg.deadline = deadline
+    msg.rectangle_shape = list(rect)
+    msg.source = source
+    msg.resolution, msg.origin_x, msg.origin_y, msg.size_x, msg.size_y = grid
+    msg.version = version
+    return msg
+
+
+def wait_for(predicate, timeout=5.0, what="condition"):
+    end = time.time() + timeout
+    while time.time() < end:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError("timed out after %.1f s waiting for %s" % (timeout, what))
+
+
+class Bus:
+    """Fake layer and bridge: publishers into the node and recorders of what it sends."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.shared, self.fleet, self.expired, self.rosout = [], [], [], []
+        self.list = None
+        self.diag = None
+        sub = rospy.Subscriber
+        sub(NS + "shared_obstacles", SharedObstacle, self._rec(self.shared), queue_size=1000)
+        sub(NS + "to_fleet", SharedObstacle, self._rec(self.fleet), queue_size=1000)
+        sub(NS + "expired_obstacles", String, lambda m: self._rec(self.expired)(m.data), queue_size=100)
+        sub(NS + "shared_obstacle_list", SharedObstacleArray, self._on_list, queue_size=10)
+        sub("/diagnostics", DiagnosticArray, self._on_diag, queue_size=100)
+        sub("/rosout", Log, self._on_rosout, queue_size=1000)
+        self.proposals = rospy.Publisher(NS + "obstacle_proposals", SharedObstacle, queue_size=100)
+        self.updates = rospy.Publisher(NS + "obstacle_updates", SharedObstacle, queue_size=100)
+        self.from_fleet = rospy.Publisher(NS + "from_fleet", SharedObstacle, queue_size=100)
+        self.map = rospy.Publisher("/map", OccupancyGrid, queue_size=1, latch=True)
+        grid = OccupancyGrid()
+        grid.header.frame_id = "map"
+        grid.info.resolution, grid.info.width, grid.info.height = RES, SX, SY
+        grid.info.origin.position.x, grid.info.origin.position.y = OX, OY
+        grid.info.origin.orientation.w = 1.0
+        grid.data = [0] * (SX * SY)
+        self.map.publish(grid)
+
+    def _rec(self, sink):
+        def record(msg):
+            with self.lock:
+                sink.append(msg)
+        return record
+
+    def _on_list(self, msg):
+        self.list = msg
+
+    def _on_diag(self, msg):
+        for status in msg.status:
+            if status.name == "sharing_handler (robot_0)":
+                self.diag = {kv.key: kv.value for kv in status.values}
+
+    def _on_rosout(self, msg):
+        if msg.name == NS + "sharing_handler":
+            with self.lock:
+                self.rosout.append(msg.msg)
+
+    def counter(self, name):
+        return int(self.diag[name]) if self.diag and name in self.diag else None
+
+    def listed(self):
+        return {o.uuid: o for o in self.list.obstacles} if self.list else {}
+
+
+class TestHandlerNode(unittest.TestCase):
+    bus = None
+    own = None  # the obstacle robot_0 authorised
+
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("rostest_handler_node")
+        cls.bus = Bus()
+        for pub in (cls.bus.proposals, cls.bus.updates, cls.bus.from_fleet, cls.bus.map):
+            wait_for(lambda: pub.get_num_connections() > 0, 15, "the node to subscribe %s" % pub.name)
+        rospy.wait_for_service(NS + "list_obstacles", 15)
+        wait_for(lambda: cls.bus.diag is not None and cls.bus.diag.get("grid") != "unknown", 10,
+                 "the node to learn the grid from /map")
+        cls.list_srv = rospy.ServiceProxy(NS + "list_obstacles", ListObstacles)
+        cls.add_srv = rospy.ServiceProxy(NS + "add_obstacle", AddObstacle)
+
+    def test_01_proposal_is_authorised_back_to_the_layer_and_out_to_the_fleet(self):
+        bus = self.bus
+        bus.proposals.publish(obstacle(marked=(305, 303, 304), rect=(0.0, 0.0, 0.5, 0.5),
+                                       source="robot_0", version=0, deadline=0))
+        wait_for(lambda: bus.shared and bus.fleet, what="the authorised obstacle")
+        shared = bus.shared[0]
+        self.assertRegex(shared.uuid, UUID4)
+        self.assertEqual((shared.version, shared.source, shared.deadline), (1, "robot_0", 60))
+        self.assertEqual(list(shared.marked_indexes), [305, 303, 304])
+        self.assertEqual(bus.fleet[0].uuid, shared.uuid)
+        wait_for(lambda: shared.uuid in bus.listed(), what="the latched list")
+        listed = bus.listed()[shared.uuid]
+        self.assertEqual(list(listed.marked_indexes), [303, 304, 305])
+        self.assertEqual(list(listed.cleared_indexes), [])
+        self.assertEqual((listed.version, listed.source), (1, "robot_0"))
+        self.assertTrue(55 <= listed.deadline <= 60, listed.deadline)
+        type(self).own = shared
+
+    def test_02_overlapping_proposal_is_not_new(self):
+        bus = self.bus
+        bus.proposals.publish(obstacle(marked=(310,), rect=(0.25, 0.25, 1.0, 1.0), source="robot_0",
+                                       version=0, deadline=0))
+        wait_for(lambda: bus.counter("redundant") == 1, what="redundant = 1 on /diagnostics")
+        self.assertEqual(bus.counter("proposals"), 2)
+        self.assertEqual((len(bus.shared), len(bus.fleet)), (1, 1))
+
+    def test_03_internal_update_goes_to_the_fleet_and_is_applied_not_echoed(self):
+        bus = self.bus
+        bus.updates.publish(obstacle(uuid=self.own.uuid, marked=(306,), cleared=(303,), version=2,
+                                     source="robot_0", deadline=60, rect=(0.0, 0.0, 0.5, 0.5)))
+        wait_for(lambda: len(bus.fleet) == 2, what="the update on to_fleet")
+        self.assertEqual((bus.fleet[1].uuid, bus.fleet[1].version), (self.own.uuid, 2))
+        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [304, 305, 306],
+                 what="the update applied in the list")
+        self.assertEqual(bus.listed()[self.own.uuid].version, 2)
+        self.assertEqual(len(bus.shared), 1, "internal updates are not sent back to the layer")
+
+    def test_04_external_add_and_update_go_to_the_layer_and_never_back_out(self):
+        bus = self.bus
+        before = time.time()
+        bus.from_fleet.publish(obstacle(uuid="ext-1", marked=(1000, 1001, 1002), version=1, deadline=30,
+                                        rect=(2.0, 0.0, 2.5, 0.5), source="robot_1"))
+        wait_for(lambda: "ext-1" in bus.listed(), what="ext-1 in the list")
+        bus.from_fleet.publish(obstacle(uuid="ext-1", marked=(1002, 1003), cleared=(1000,), version=2,
+                                        deadline=30, rect=(2.0, 0.0, 2.5, 0.5), source="robot_2"))
+        wait_for(lambda: list(bus.listed()["ext-1"].marked_indexes) == [1001, 1002, 1003],
+                 what="ext-1 updated")
+        self.assertEqual([m.uuid for m in bus.shared[1:]], ["ext-1", "ext-1"])
+        self.assertEqual([m.version for m in bus.shared[1:]], [1, 2])
+        self.assertEqual(len(bus.fleet), 2, "external messages are never sent back out")
+        listed = bus.listed()["ext-1"]
+        self.assertEqual((listed.source, listed.version), ("robot_1", 2))
+        reply = self.list_srv()
+        index = [o.uuid for o in reply.obstacles].index("ext-1")
+        self.assertAlmostEqual(reply.arrival_times[index], before, delta=2.0)
+        self.assertTrue(27 < reply.remaining_seconds[index] <= 30, reply.remaining_seconds[index])
+        self.assertEqual(list(reply.obstacles[index].marked_indexes), [1001, 1002, 1003])
+        self.assertEqual(sorted(o.uuid for o in reply.obstacles), sorted([self.own.uuid, "ext-1"]))
+
+    def test_05_bad_fleet_messages_are_dropped_logged_and_counted(self):
+        bus = self.bus
+        good = dict(uuid="ext-1", marked=(1500,), version=5, source="robot_9", deadline=30,
+                    rect=(2.0, 0.0, 2.5, 0.5))
+        bad = {
+            "empty_uuid": dict(uuid=""),
+            "index_out_of_range": dict(marked=(SX * SY,)),
+            "too_many_cells": dict(marked=range(5001)),
+            "geometry_mismatch": dict(grid=(0.1, OX, OY, SX, SY)),
+            "bad_geometry": dict(grid=(0.0, OX, OY, SX, SY)),
+            "zero_deadline": dict(deadline=0),
+            "non_finite_rectangle": dict(rect=(float("nan"), 0.0, 1.0, 1.0)),
+            "malformed": dict(rect=(0.0, 0.0, 1.0)),
+            "own_source": dict(source="robot_0"),
+            "bad_version": dict(version=0),
+        }
+        listed_before = {u: list(o.marked_indexes) for u, o in bus.listed().items()}
+        for reason, change in bad.items():
+            fields = dict(good)
+            fields.update(change)
+            bus.from_fleet.publish(obstacle(**fields))
+        for reason in bad:
+            wait_for(lambda: bus.counter("dropped_" + reason) == 1, what="dropped_%s = 1" % reason)
+        self.assertEqual(bus.counter("dropped"), len(bad))
+        self.assertEqual({u: list(o.marked_indexes) for u, o in bus.listed().items()}, listed_before)
+        self.assertEqual(len(bus.fleet), 2)
+        for reason in bad:
+            lines = [line for line in bus.rosout if "dropped" in line and reason in line]
+            if reason == "own_source":
+                self.assertTrue(lines and "robot_0" in lines[0], lines)
+            else:
+                self.assertTrue(lines and "robot_9" in lines[0], (reason, bus.rosout[-12:]))
+        # the node is still alive and applies the next good message
+        bus.from_fleet.publish(obstacle(**good))
+        wait_for(lambda: 1500 in bus.listed()["ext-1"].marked_indexes, what="the good message")
+
+    def test_06_manual_add_is_shared_like_a_detection(self):
+        bus = self.bus
+        reply = self.add_srv(rectangle_shape=[-5.0, -2.5, -4.9, -2.45], marked_indexes=[], deadline=0)
+        self.assertTrue(reply.success, reply.message)
+        self.assertRegex(reply.uuid, UUID4)
+        wait_for(lambda: bus.fleet[-1].uuid == reply.uuid and bus.shared[-1].uuid == reply.uuid,
+                 what="the manual obstacle on to_fleet and shared_obstacles")
+        self.assertEqual((list(bus.fleet[-1].marked_indexes), bus.fleet[-1].deadline), ([0, 1], 60))
+        refused = self.add_srv(rectangle_shape=[-5.0, -2.5, -4.9, -2.45], marked_indexes=[], deadline=0)
+        self.assertFalse(refused.success)
+        self.assertIn(reply.uuid, refused.message)
+
+    def test_07_expiry_tells_the_layer_and_sends_nothing_to_the_fleet(self):
+        bus = self.bus
+        fleet_before = len(bus.fleet)
+        bus.from_fleet.publish(obstacle(uuid="short-1", marked=(2000,), version=1, deadline=1,
+                                        rect=(3.0, 0.0, 3.5, 0.5), source="robot_3"))
+        wait_for(lambda: "short-1" in bus.listed(), what="short-1 in the list")
+        wait_for(lambda: "short-1" in bus.expired, timeout=4, what="short-1 on expired_obstacles")
+        wait_for(lambda: "short-1" not in bus.listed(), what="short-1 gone from the list")
+        self.assertEqual(len(bus.fleet), fleet_before)
+        # a late message for it does not bring it back
+        bus.from_fleet.publish(obstacle(uuid="short-1", marked=(2001,), version=2, deadline=1,
+                                        rect=(3.0, 0.0, 3.5, 0.5), source="robot_4"))
+        wait_for(lambda: bus.counter("dropped_expired") == 1, what="dropped_expired = 1")
+        self.assertNotIn("short-1", bus.listed())
+        self.assertEqual(bus.counter("expired"), 1)
+
+    def test_08_snapshot_file_is_yaml_of_the_current_list(self):
+        path = rospy.get_param("~snapshot_file")
+        wanted = set(self.bus.listed())
+
+        def current():
+            try:
+                with open(path) as f:
+                    doc = yaml.safe_load(f)
+            except (OSError, yaml.YAMLError):
+                return False
+            return {o["uuid"] for o in doc["obstacles"]} == wanted
+        wait_for(current, what="the snapshot %s to list %s" % (path, sorted(wanted)))
+        with open(path) as f:
+            doc = yaml.safe_load(f)
+        ext = [o for o in doc["obstacles"] if o["uuid"] == "ext-1"][0]
+        self.assertEqual(doc["robot"], "robot_0")
+        self.assertEqual(ext["source"], "robot_1")
+        self.assertEqual(ext["cells"], [1001, 1002, 1003, 1500])
+        os.unlink(path)
+
+    def test_09_bad_parameter_fails_at_startup_naming_it(self):
+        proc = subprocess.run([sys.executable, os.path.join(HERE, "..", "scripts", "sharing_handler"),
+                               "__ns:=robot_5", "__name:=sharing_handler", "_obstacle_duration:=-5"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=20)
+        self.assertEqual(proc.returncode, 2)
+        self.assertIn("~obstacle_duration = -5", proc.stderr.decode())
+
+
+if __name__ == "__main__":
+    rostest.rosrun("sharing_handler_py", "handler_node", TestHandlerNode, sys.argv)

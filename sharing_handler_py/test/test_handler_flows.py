@@ -1,0 +1,300 @@
+"""Every flow of the SharingHandler, through the pure module (no roscore)."""
+import logging
+import re
+
+import pytest
+
+from handler_fixtures import GRID, FakeClock, Recorder, proposal, rect, state, update
+from sharing_handler_py.errors import InvalidRequestError
+from sharing_handler_py.logic import SharingHandler
+
+UUID4 = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-4[0-9a-f]{3}-[89ab][0-9a-f]{3}-[0-9a-f]{12}$")
+
+
+# ---------------------------------------------------------------- proposals
+
+def test_proposal_is_authorised_to_layer_then_fleet_with_uuid4_deadline_and_version_1():
+    r = Recorder(duration=45)
+    shared = r.handler.on_proposal(proposal(cells=(12, 10, 11)))
+    assert UUID4.match(shared.uuid), shared.uuid
+    assert (shared.version, shared.source, shared.deadline) == (1, "robot_0", 45)
+    assert [kind for kind, _ in r.events] == ["layer", "fleet"]
+    assert r.layer == [shared] and r.fleet == [shared]
+    held = r.handler.get(shared.uuid)
+    assert held.cells == (10, 11, 12)
+    assert held.arrival == 100.0 and held.remaining == 45
+    assert r.handler.counters["authorised"] == 1 and r.changes == 1
+
+
+def test_fractional_duration_rounds_up_to_whole_seconds():
+    r = Recorder(duration=2.5)
+    assert r.handler.on_proposal(proposal()).deadline == 3
+
+
+def test_overlapping_proposal_is_not_new_and_dropped_with_a_debug_line(caplog):
+    r = Recorder()
+    first = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 2, 2)))
+    with caplog.at_level(logging.DEBUG, logger="sharing_handler_py"):
+        assert r.handler.on_proposal(proposal(rectangle=rect(1, 1, 3, 3))) is None
+    assert len(r.fleet) == 1 and len(r.layer) == 1
+    assert r.handler.counters["redundant"] == 1
+    lines = [rec for rec in caplog.records if "not new" in rec.getMessage()]
+    assert len(lines) == 1 and lines[0].levelno == logging.DEBUG
+    assert first.uuid in lines[0].getMessage()
+
+
+def test_proposal_overlapping_an_external_obstacle_is_redundant_too():
+    r = Recorder()
+    r.handler.on_external(update("ext-1", marked=(5,), version=1, rectangle=rect(0, 0, 2, 2)))
+    assert r.handler.on_proposal(proposal(rectangle=rect(1.5, 1.5, 4, 4))) is None
+    assert r.handler.counters["redundant"] == 1
+
+
+def test_touching_rectangles_do_not_overlap_but_a_degenerate_one_inside_does():
+    assert not rect(0, 0, 1, 1).overlaps(rect(1, 0, 2, 1))
+    assert rect(0, 0, 1, 1).overlaps(rect(0.5, 0.5, 0.5, 0.5))
+    assert rect(0, 0, 1, 1).overlaps(rect(1, 0.5, 1, 0.5))
+    assert not rect(0, 0, 1, 1).overlaps(rect(1.01, 0.5, 1.01, 0.5))
+    r = Recorder()
+    r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    assert r.handler.on_proposal(proposal(rectangle=rect(1, 0, 2, 1))) is not None
+
+
+def test_first_proposal_sets_the_grid_when_no_map_has_arrived():
+    r = Recorder(geometry=None)
+    assert r.handler.geometry is None
+    r.handler.on_proposal(proposal())
+    assert r.handler.geometry == GRID
+
+
+# ---------------------------------------------------------------- internal updates
+
+def test_internal_update_is_sent_to_the_fleet_before_it_is_applied():
+    r = Recorder()
+    shared = r.handler.on_proposal(proposal(cells=(10, 11)))
+    seen_at_send = []
+    r.handler._to_fleet = lambda o: seen_at_send.append(r.handler.get(o.uuid).cells)
+    sent = r.handler.on_internal_update(update(shared.uuid, marked=(20,), cleared=(10,), version=2,
+                                               source="robot_0"))
+    assert seen_at_send == [(10, 11)]
+    assert sent.version == 2 and sent.source == "robot_0"
+    assert r.handler.get(shared.uuid).cells == (11, 20)
+    assert r.handler.get(shared.uuid).version == 2
+    assert len(r.layer) == 1, "an internal update is not echoed to the layer"
+    assert r.handler.counters["updates_out"] == 1
+
+
+def test_internal_update_with_a_stale_version_is_restamped_above_the_max_seen(caplog):
+    r = Recorder()
+    shared = r.handler.on_proposal(proposal(cells=(10,)))
+    r.handler.on_external(update(shared.uuid, marked=(30,), version=7, source="robot_1"))
+    with caplog.at_level(logging.DEBUG, logger="sharing_handler_py"):
+        sent = r.handler.on_internal_update(update(shared.uuid, marked=(40,), cleared=(30,),
+                                                   version=3, source="robot_0"))
+    assert sent.version == 8
+    assert r.fleet[-1].version == 8
+    assert r.handler.get(shared.uuid).cells == (10, 40)
+    assert r.handler.counters["restamped"] == 1
+    assert any("re-stamped 8" in rec.getMessage() for rec in caplog.records)
+
+
+def test_internal_update_keeps_the_first_rectangle_and_deadline():
+    r = Recorder(duration=60)
+    shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    sent = r.handler.on_internal_update(update(shared.uuid, marked=(1,), version=2, source="robot_0",
+                                               deadline=0, rectangle=rect(0, 0, 5, 5)))
+    assert sent.rectangle == rect(0, 0, 1, 1) and sent.deadline == 60
+
+
+def test_internal_update_for_an_unknown_uuid_is_dropped():
+    r = Recorder()
+    assert r.handler.on_internal_update(update("nope", marked=(1,), source="robot_0")) is None
+    assert r.fleet == [] and r.handler.counters["dropped_unknown_uuid"] == 1
+
+
+# ---------------------------------------------------------------- external messages
+
+def test_external_unknown_uuid_is_added_with_its_deadline_and_local_arrival_and_not_echoed():
+    r = Recorder(duration=60)
+    r.clock.now = 250.0
+    msg = update("ext-1", marked=(3, 1, 2), version=1, source="robot_1", deadline=17)
+    assert r.handler.on_external(msg) is True
+    held = r.handler.get("ext-1")
+    assert (held.cells, held.deadline, held.arrival, held.source) == ((1, 2, 3), 17, 250.0, "robot_1")
+    assert r.layer == [msg] and r.fleet == []
+    assert r.handler.counters["updates_in"] == 1
+
+
+def test_external_update_appends_marked_without_duplicates_then_removes_cleared():
+    r = Recorder()
+    r.handler.on_external(update("ext-1", marked=(1, 2, 3), version=1, source="robot_1"))
+    second = update("ext-1", marked=(3, 4, 5, 5), cleared=(1, 5), version=2, source="robot_2")
+    r.handler.on_external(second)
+    assert r.handler.get("ext-1").cells == (2, 3, 4)
+    assert r.layer[-1] is second and r.fleet == []
+
+
+def test_older_update_arriving_late_cannot_undo_a_newer_one():
+    r = Recorder()
+    r.handler.on_external(update("ext-1", marked=(1,), version=1, source="robot_1"))
+    r.handler.on_external(update("ext-1", cleared=(1,), version=3, source="robot_2"))
+    r.handler.on_external(update("ext-1", marked=(1,), version=2, source="robot_1"))
+    assert r.handler.get("ext-1").cells == ()
+    assert r.handler.get("ext-1").version == 3
+
+
+def test_the_first_share_defines_rectangle_deadline_and_source_even_when_it_arrives_late():
+    r = Recorder()
+    r.handler.on_external(update("ext-1", marked=(1,), version=3, source="robot_2", deadline=90,
+                                 rectangle=rect(0, 0, 9, 9)))
+    r.handler.on_external(update("ext-1", marked=(2,), version=1, source="robot_1", deadline=30,
+                                 rectangle=rect(0, 0, 1, 1)))
+    held = r.handler.get("ext-1")
+    assert (held.source, held.deadline, held.rectangle, held.version) == \
+        ("robot_1", 30, rect(0, 0, 1, 1), 3)
+
+
+def test_fleet_messages_wait_for_the_grid_and_are_applied_when_the_map_arrives():
+    r = Recorder(geometry=None)
+    assert r.handler.on_external(update("ext-1", marked=(1,), version=1)) is False
+    assert r.handler.counters["deferred"] == 1 and len(r.handler) == 0
+    r.handler.set_geometry(GRID)
+    assert r.handler.get("ext-1").cells == (1,)
+    assert len(r.layer) == 1
+
+
+def test_waiting_queue_is_bounded():
+    r = Recorder(geometry=None, max_deferred=2)
+    for i in range(3):
+        r.handler.on_external(update("ext-%d" % i, marked=(1,), version=1))
+    assert r.handler.counters["dropped_no_geometry"] == 1
+    r.handler.set_geometry(GRID)
+    assert [h.uuid for h in r.handler.obstacles()] == ["ext-0", "ext-1"]
+
+
+# ---------------------------------------------------------------- expiry
+
+def test_obstacle_expires_exactly_at_deadline_after_local_arrival_without_any_fleet_message():
+    r = Recorder(duration=10)
+    shared = r.handler.on_proposal(proposal())
+    r.clock.now = 100.0 + 9.999
+    assert r.handler.expire() == []
+    r.clock.now = 110.0
+    changes = r.changes
+    assert r.handler.expire() == [shared.uuid]
+    assert r.expired == [shared.uuid] and len(r.handler) == 0
+    assert r.fleet == [shared], "expiry sends nothing to the fleet"
+    assert r.handler.counters["expired"] == 1 and r.changes == changes + 1
+
+
+def test_external_obstacle_expires_by_its_own_deadline_counted_from_local_arrival():
+    r = Recorder(duration=60)
+    r.clock.now = 500.0
+    r.handler.on_external(update("ext-1", marked=(1,), version=1, deadline=5))
+    r.clock.now = 504.0
+    assert r.handler.expire() == []
+    r.clock.now = 505.0
+    assert r.handler.expire() == ["ext-1"]
+
+
+def test_late_message_for_an_expired_obstacle_does_not_resurrect_it_until_the_tombstone_ends():
+    r = Recorder(duration=60)
+    r.handler.on_external(update("ext-1", marked=(1,), version=1, deadline=5))
+    r.clock.now += 5
+    r.handler.expire()
+    assert r.handler.on_external(update("ext-1", marked=(2,), version=2)) is False
+    assert len(r.handler) == 0 and r.handler.counters["dropped_expired"] == 1
+    assert r.handler.is_tombstoned("ext-1")
+    r.clock.now += 59.9
+    r.handler.expire()
+    assert r.handler.is_tombstoned("ext-1"), "remembered for at least obstacle_duration"
+    r.clock.now += 0.1
+    r.handler.expire()
+    assert not r.handler.is_tombstoned("ext-1")
+
+
+def test_internal_update_for_an_expired_obstacle_is_dropped():
+    r = Recorder(duration=1)
+    shared = r.handler.on_proposal(proposal())
+    r.clock.now += 1
+    r.handler.expire()
+    assert r.handler.on_internal_update(update(shared.uuid, marked=(1,), source="robot_0")) is None
+    assert r.handler.counters["dropped_expired"] == 1 and len(r.fleet) == 1
+
+
+# ---------------------------------------------------------------- manual add and list
+
+def test_manual_add_fills_the_rectangle_and_is_shared_like_a_detection():
+    r = Recorder(duration=60)
+    shared = r.handler.add_manual([-10.0, -5.0, -9.9, -4.95])   # 2 x 1 cells at the grid corner
+    assert shared.marked == (0, 1) and shared.deadline == 60 and shared.version == 1
+    assert r.layer == [shared] and r.fleet == [shared]
+    assert r.handler.counters["manual"] == 1
+
+
+def test_manual_add_with_cells_and_deadline():
+    r = Recorder()
+    shared = r.handler.add_manual([0, 0, 1, 1], marked=(7, 8), deadline=12)
+    assert (shared.marked, shared.deadline) == ((7, 8), 12)
+
+
+@pytest.mark.parametrize("kwargs,why", [
+    (dict(rectangle=[100, 100, 101, 101]), "covers no cell"),
+    (dict(rectangle=[0, 0, 1]), "4"),
+    (dict(rectangle=[0, 0, 1, 1], marked=(400 * 200,)), "index_out_of_range"),
+    (dict(rectangle=[-10, -5, -9, -4]), "overlaps"),
+])
+def test_manual_add_refusals_say_why(kwargs, why):
+    r = Recorder()
+    r.handler.on_proposal(proposal(rectangle=rect(-10, -5, -9, -4)))
+    with pytest.raises(InvalidRequestError, match=why):
+        r.handler.add_manual(**kwargs)
+    assert len(r.handler) == 1
+
+
+def test_manual_add_without_a_grid_is_refused():
+    with pytest.raises(InvalidRequestError, match="no map"):
+        Recorder(geometry=None).handler.add_manual([0, 0, 1, 1])
+
+
+def test_list_holds_full_state_sorted_by_uuid_with_remaining_time():
+    r = Recorder(duration=60)
+    r.handler.on_external(update("b", marked=(2,), version=4, deadline=30, source="robot_2"))
+    r.handler.on_external(update("a", marked=(5, 1), cleared=(9,), version=1, deadline=10,
+                                 source="robot_1"))
+    r.clock.now += 2.5
+    held = r.handler.obstacles()
+    assert [h.uuid for h in held] == ["a", "b"]
+    full = held[0].to_obstacle()
+    assert (full.marked, full.cleared, full.deadline, full.version, full.source) == \
+        ((1, 5), (), 8, 1, "robot_1")
+    assert held[0].remaining == pytest.approx(7.5)
+
+
+def test_list_deadline_is_at_least_one_second():
+    r = Recorder()
+    r.handler.on_external(update("a", marked=(1,), version=1, deadline=3))
+    r.clock.now += 2.99999
+    assert r.handler.obstacles()[0].to_obstacle().deadline == 1
+
+
+def test_handler_rejects_bad_construction_arguments():
+    with pytest.raises(ValueError, match="obstacle_duration"):
+        SharingHandler("robot_0", FakeClock(), -1, print, print, print)
+    with pytest.raises(ValueError, match="robot_name"):
+        SharingHandler("", FakeClock(), 60, print, print, print)
+
+
+def test_same_messages_same_state_and_duplicates_change_nothing():
+    a, b = Recorder("observer_a"), Recorder("observer_b")
+    msgs = [update("x", marked=(1, 2), version=1, source="robot_1"),
+            update("x", marked=(3,), cleared=(1,), version=2, source="robot_2")]
+    for m in msgs + msgs:
+        a.handler.on_external(m)
+    changes = a.changes
+    for m in msgs:
+        a.handler.on_external(m)
+    assert a.changes == changes
+    for m in reversed(msgs):
+        b.handler.on_external(m)
+    assert state(a.handler) == state(b.handler)
