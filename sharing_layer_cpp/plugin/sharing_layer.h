@@ -1,0 +1,64 @@
+#ifndef SHARING_LAYER_PLUGIN_SHARING_LAYER_H
+#define SHARING_LAYER_PLUGIN_SHARING_LAYER_H
+
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <costmap_2d/obstacle_layer.h>
+#include <ros/ros.h>
+#include <sharing_msgs/SharedObstacle.h>
+#include <std_msgs/Empty.h>
+#include <std_msgs/String.h>
+
+#include "sharing_layer/sharing_core.h"
+
+namespace sharing_layer
+{
+/**
+ * @brief costmap_2d plugin: an ObstacleLayer whose marking, clearing, proposals and monitoring are done by
+ * the ROS-free SharingCore. This class only reads parameters, converts messages and calls the core.
+ *
+ * Topics (in the robot's namespace): subscribes stuck_feedback (std_msgs/Empty),
+ * move_base/recovery_status (any type: each message counts as a stuck signal), shared_obstacles
+ * (sharing_msgs/SharedObstacle), expired_obstacles (std_msgs/String); publishes obstacle_proposals and
+ * obstacle_updates (sharing_msgs/SharedObstacle).
+ */
+class SharingLayer : public costmap_2d::ObstacleLayer
+{
+public:
+  SharingLayer() = default;
+  ~SharingLayer() override = default;
+
+  void onInitialize() override;
+  void updateBounds(double robot_x, double robot_y, double robot_yaw, double* min_x, double* min_y, double* max_x,
+                    double* max_y) override;
+  void updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, int min_j, int max_i, int max_j) override;
+  void reset() override;
+  void matchSize() override;
+
+private:
+  void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
+  void recoveryCallback(const ros::MessageEvent<topic_tools::ShapeShifter const>& event);
+  void sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& msg);
+  void expiredCallback(const std_msgs::String::ConstPtr& msg);
+  void rebuildCore();
+  GridGeometry masterGeometry() const;
+
+  LayerParams params_;
+  std::unique_ptr<SharingCore> core_;
+  std::mutex core_mutex_;
+  bool stuck_pending_ = false;
+  ros::Time stuck_stamp_;
+  std::string global_frame_;
+  ros::Publisher proposals_pub_;
+  ros::Publisher updates_pub_;
+  ros::Subscriber stuck_sub_;
+  ros::Subscriber recovery_sub_;
+  ros::Subscriber shared_sub_;
+  ros::Subscriber expired_sub_;
+};
+
+}  // namespace sharing_layer
+
+#endif  // SHARING_LAYER_PLUGIN_SHARING_LAYER_H
