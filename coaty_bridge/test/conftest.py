@@ -120,3 +120,178 @@ def observer(broker):
     obs = Observer(broker.url)
     yield obs
     obs.close()
+
+
+class JsonLinesProcess:
+    """A child process that speaks JSON lines: send() writes a command, expect() waits
+    for an event matching a predicate (events are kept, so order does not matter)."""
+
+    def __init__(self, name, argv, env=None, cwd=None):
+        import subprocess
+        import threading
+        self.name = name
+        self.events = []
+        self.stderr_tail = []
+        self._stdout_done = False
+        self._cond = threading.Condition()
+        self.proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, env=env, cwd=cwd, text=True, bufsize=1)
+        threading.Thread(target=self._read_stdout, daemon=True).start()
+        threading.Thread(target=self._read_stderr, daemon=True).start()
+
+    def _read_stdout(self):
+        import json
+        for line in self.proc.stdout:
+            try:
+                event = json.loads(line)
+            except ValueError:
+                event = {"event": "text", "text": line.rstrip()}
+            with self._cond:
+                self.events.append(event)
+                self._cond.notify_all()
+        with self._cond:
+            self._stdout_done = True
+            self._cond.notify_all()
+
+    def _read_stderr(self):
+        for line in self.proc.stderr:
+            self.stderr_tail = (self.stderr_tail + [line.rstrip()])[-30:]
+
+    def send(self, command):
+        import json
+        self.proc.stdin.write(json.dumps(command) + "\n")
+        self.proc.stdin.flush()
+
+    def expect(self, predicate, timeout=15.0, what="event"):
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for event in self.events:
+                    if predicate(event):
+                        return event
+                left = deadline - time.monotonic()
+                if left <= 0 or self._stdout_done:
+                    raise AssertionError("%s: no %s within %.0f s%s; last events %s; stderr %s" % (
+                        self.name, what, timeout, " (process ended)" if self._stdout_done else "",
+                        self.events[-8:], "\n".join(self.stderr_tail[-10:])))
+                self._cond.wait(min(left, 0.2))
+
+    def stop(self, timeout=5.0):
+        import subprocess
+        if self.proc.poll() is None:
+            try:
+                self.proc.stdin.close()
+            except OSError:
+                pass
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+class RosGraph:
+    """A private rosmaster on a free port plus helpers to start coaty_bridge nodes."""
+
+    PKG = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+    def __init__(self):
+        import subprocess
+        from coaty_bridge.broker import free_port
+        self.port = free_port()
+        self.env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % self.port,
+                        ROS_IP="127.0.0.1", ROS_HOSTNAME="127.0.0.1",
+                        PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""),
+                        ROS_LOG_DIR=os.environ.get("ROS_LOG_DIR", "/tmp/coaty_bridge_test_logs"))
+        self.master = subprocess.Popen(["rosmaster", "--core", "-p", str(self.port)], env=self.env,
+                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10
+        import socket
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.2).close()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise AssertionError("rosmaster did not start")
+                time.sleep(0.05)
+        self.nodes = []
+
+    def bridge(self, robot, *params):
+        """Starts robot/coaty_bridge with private params given as 'name:=value' strings."""
+        import subprocess
+        argv = [sys.executable, os.path.join(self.PKG, "scripts", "coaty_bridge"),
+                "__ns:=" + robot, "__name:=coaty_bridge"] + ["_" + p for p in params]
+        proc = subprocess.Popen(argv, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.nodes.append(proc)
+        return proc
+
+    def probe(self, *robots):
+        proc = JsonLinesProcess("bridge_probe", [sys.executable, os.path.join(self.PKG, "test", "bridge_probe.py")]
+                                + list(robots), env=self.env)
+        self.nodes.append(proc)
+        proc.expect(lambda e: e.get("event") == "ready", what="probe ready")
+        return proc
+
+    def close(self):
+        import signal
+        import subprocess
+        for node in reversed(self.nodes):
+            if isinstance(node, JsonLinesProcess):
+                node.stop()
+            elif node.poll() is None:
+                node.send_signal(signal.SIGINT)
+                try:
+                    node.wait(5)
+                except subprocess.TimeoutExpired:
+                    node.kill()
+                    node.wait()
+        self.master.terminate()
+        self.master.wait(5)
+
+
+def ros_unavailable():
+    """Why the ROS tests cannot run here, or None."""
+    import shutil
+    if not shutil.which("rosmaster"):
+        return "rosmaster not installed"
+    try:
+        import rospy  # noqa: F401
+        from sharing_msgs.msg import SharedObstacle  # noqa: F401
+        from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
+    except ImportError as err:
+        return "ROS workspace not built or not sourced (%s)" % err
+    return None
+
+
+@pytest.fixture
+def ros_graph():
+    reason = ros_unavailable()
+    if reason:
+        pytest.skip(reason)
+    graph = RosGraph()
+    yield graph
+    graph.close()
+
+
+@pytest.fixture
+def json_lines_process():
+    """The JsonLinesProcess class (tests must not import conftest by name)."""
+    return JsonLinesProcess
+
+
+@pytest.fixture
+def observer_factory():
+    made = []
+
+    def make(url):
+        obs = Observer(url)
+        made.append(obs)
+        return obs
+    yield make
+    for obs in made:
+        try:
+            obs.close()
+        except Exception:
+            pass

@@ -1,0 +1,142 @@
+"""Interop with the real Coaty JS library (@coaty/core 2.4.1 from the npm registry).
+
+The library is installed once into a cache outside the repo
+(``$FLEET_COATY_CACHE`` or ~/.cache/fleet-coaty-interop) and reused. If npm cannot
+reach the registry the test is skipped with the npm error as the reason.
+"""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import uuid as uuidlib
+
+import pytest
+
+from coaty_bridge.broker import Broker
+
+pytestmark = [pytest.mark.npm, pytest.mark.broker, pytest.mark.ros]
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CACHE = os.environ.get("FLEET_COATY_CACHE", os.path.expanduser("~/.cache/fleet-coaty-interop"))
+PACKAGES = ["@coaty/core@2.4.1", "rxjs@^6.6.7"]
+OT = "org.fleetsharing.SharedObstacle"
+NETWORK_ERRORS = ("ENOTFOUND", "EAI_AGAIN", "ECONNREFUSED", "ECONNRESET", "ETIMEDOUT", "ENETUNREACH",
+                  "network", "proxy")
+
+
+def installed_version():
+    try:
+        with open(os.path.join(CACHE, "node_modules", "@coaty", "core", "package.json")) as meta:
+            return json.load(meta).get("version")
+    except (OSError, ValueError):
+        return None
+
+
+@pytest.fixture(scope="module")
+def coaty_js():
+    """The cache directory holding node_modules/@coaty/core 2.4.1."""
+    if not shutil.which("node") or not shutil.which("npm"):
+        pytest.skip("node/npm not installed")
+    if installed_version() != "2.4.1":
+        os.makedirs(CACHE, exist_ok=True)
+        proc = subprocess.run(["npm", "install", "--prefix", CACHE, "--legacy-peer-deps", "--no-audit",
+                               "--no-fund"] + PACKAGES, capture_output=True, text=True, timeout=240)
+        if proc.returncode != 0:
+            text = proc.stdout + proc.stderr
+            if any(marker in text for marker in NETWORK_ERRORS):
+                pytest.skip("npm registry unreachable, Coaty JS interop not tested: %s" % text.strip()[-300:])
+            raise AssertionError("npm install failed: %s" % text[-1000:])
+        assert installed_version() == "2.4.1", "npm did not install @coaty/core 2.4.1"
+    return CACHE
+
+
+def ros_obstacle(source, **fields):
+    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=[2001000, 2001001, 2003005, 3999999],
+               cleared_indexes=[2000999], deadline=90, rectangle_shape=[0.25, 0.5, 1.75, 2.0], source=source,
+               resolution=0.05000000074505806, origin_x=-12.5, origin_y=7.25, size_x=2000, size_y=2000,
+               version=1, stamp=1700000123.5, frame_id="map")
+    msg.update(fields)
+    return msg
+
+
+def js_obstacle():
+    oid = str(uuidlib.uuid4())
+    # Written as a JS program would: 1 rather than 1.0, plain index arrays.
+    return {"objectType": OT, "coreType": "CoatyObject", "objectId": oid, "name": "js obstacle",
+            "uuid": oid, "source": "js_peer", "version": 2, "stamp": 1700000200, "frameId": "map",
+            "deadline": 30, "rectangle": [0, 0, 1, 1], "resolution": 1, "origin": [0, -5], "size": [20, 10],
+            "markedIndexes": [3, 4, 199], "clearedIndexes": []}
+
+
+def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_process):
+    with Broker() as broker:
+        params = ["broker_url:=" + broker.url, "namespace:=fleet"]
+        robot_0 = ros_graph.bridge("robot_0", *params)
+        probe = ros_graph.probe("robot_0", "robot_1")
+        peer = json_lines_process(
+            "coaty_js_peer", ["node", os.path.join(HERE, "coaty_js_peer.js"), broker.url, "fleet", OT],
+            env=dict(os.environ, NODE_PATH=os.path.join(coaty_js, "node_modules")), cwd=coaty_js)
+        try:
+            peer.expect(lambda e: e.get("event") == "ready", what="Coaty JS agent online")
+
+            # (c) the peer discovers our Identity
+            identity = None
+            for _ in range(20):
+                peer.send({"cmd": "discoverIdentities"})
+                try:
+                    identity = peer.expect(lambda e: e.get("event") == "identity" and
+                                           e["object"]["name"] == "robot_0", timeout=1.0, what="robot_0")["object"]
+                    break
+                except AssertionError:
+                    continue  # the bridge is still starting
+            assert identity, "(c) Coaty JS never discovered robot_0's Identity"
+            assert identity["coreType"] == "Identity" and identity["objectType"] == "coaty.Identity"
+
+            # (a) an obstacle our bridge publishes reaches the peer with every field intact
+            mine = ros_obstacle("robot_0")
+            probe.send({"cmd": "to_fleet", "robot": "robot_0", "msg": mine})
+            seen = peer.expect(lambda e: e.get("event") == "advertise" and e["object"]["uuid"] == mine["uuid"],
+                               what="(a) robot_0's obstacle at the Coaty JS peer")
+            obj = seen["object"]
+            assert obj["objectId"] == mine["uuid"] and obj["source"] == "robot_0" and obj["version"] == 1
+            assert seen["marked"] == mine["marked_indexes"] and seen["cleared"] == mine["cleared_indexes"]
+            assert obj["rectangle"] == mine["rectangle_shape"] and obj["deadline"] == 90
+            assert obj["origin"] == [-12.5, 7.25] and obj["size"] == [2000, 2000]
+            assert obj["resolution"] == pytest.approx(0.05) and obj["stamp"] == 1700000123.5
+            assert obj["frameId"] == "map" and "parentObjectId" not in obj
+
+            # (b) an obstacle the peer publishes reaches ROS on from_fleet, numbers cast
+            theirs = js_obstacle()
+            peer.send({"cmd": "publish", "object": theirs})
+            got = probe.expect(lambda e: e.get("event") == "from_fleet" and e["robot"] == "robot_0" and
+                               e["msg"]["uuid"] == theirs["uuid"], what="(b) the JS obstacle on robot_0/from_fleet")
+            msg = got["msg"]
+            assert msg["marked_indexes"] == [3, 4, 199] and msg["cleared_indexes"] == []
+            assert msg["resolution"] == 1.0 and msg["types"]["resolution"] == "float"
+            assert (msg["origin_x"], msg["origin_y"]) == (0.0, -5.0) and msg["types"]["origin_x"] == "float"
+            assert (msg["size_x"], msg["size_y"], msg["version"], msg["deadline"]) == (20, 10, 2, 30)
+            assert msg["source"] == "js_peer" and msg["stamp"] == 1700000200.0
+            assert not [e for e in probe.events if e.get("event") == "from_fleet" and e["msg"]["uuid"] == mine["uuid"]], \
+                "robot_0's own obstacle came back to it"
+
+            # (d) a bridge started late gets the obstacles already in the fleet: robot_0's
+            # (from its shared_obstacle_list) and the JS peer's (the peer answers Discover too)
+            probe.send({"cmd": "list", "robot": "robot_0", "msgs": [mine]})
+            probe.expect(lambda e: e.get("event") == "sent", what="list sent")
+            ros_graph.bridge("robot_1", *params)
+            for uuid in (mine["uuid"], theirs["uuid"]):
+                probe.expect(lambda e: e.get("event") == "from_fleet" and e["robot"] == "robot_1" and
+                             e["msg"]["uuid"] == uuid, timeout=20, what="(d) obstacle %s at late robot_1" % uuid)
+            late_mine = [e["msg"] for e in probe.events if e.get("event") == "from_fleet"
+                         and e["robot"] == "robot_1" and e["msg"]["uuid"] == mine["uuid"]][0]
+            assert late_mine["marked_indexes"] == mine["marked_indexes"] and late_mine["source"] == "robot_0"
+
+            # (c) the peer sees the Deadvertise of a killed bridge (the last will)
+            robot_0.send_signal(signal.SIGKILL)
+            robot_0.wait(5)
+            peer.expect(lambda e: e.get("event") == "deadvertise" and identity["objectId"] in e["objectIds"],
+                        what="(c) robot_0's last-will Deadvertise at the Coaty JS peer")
+        finally:
+            peer.send({"cmd": "exit"}) if peer.proc.poll() is None else None
+            peer.stop()
