@@ -9,8 +9,8 @@ footprints. Time is only ``self.time``: nothing here reads a clock.
 Frames: the world frame is Stage's. Odometry is perfect and its frame is the
 world frame, as stageros publishes it with Stage's default "gps" localisation.
 ``map_to_odom(i)`` is what a localiser would publish: T_map_world (derived from
-the floorplan, see ``frames.world_from_map``) composed with robot i's
-configurable error (offset + Gaussian noise, redrawn every step from ``seed``).
+the floorplan, see ``frames.world_from_map``) with robot i's configurable error
+(offset + Gaussian noise, redrawn every step from ``seed``) applied at the robot.
 """
 import logging
 import math
@@ -244,11 +244,18 @@ class Simulation:
 
     # --- localisation -------------------------------------------------------------
     def map_to_odom(self, index):
-        """T_map_odom as the robot believes it: error ∘ T_map_world (odom = world frame)."""
+        """T_map_odom as robot ``index`` believes it (odom = world frame).
+
+        The error is robot-centred, as a localiser's error is: the believed pose in
+        the map is the true one shifted by (dx, dy) in the map frame and turned by
+        dyaw about the robot, plus this step's noise. Without error this is
+        T_map_world.
+        """
         r = self.robot(index)
         e, n = r.loc_error, r.loc_noise
-        err = (e.dx + n[0], e.dy + n[1], e.dyaw + n[2])
-        return frames.compose(err, self.map_from_world)
+        true_map = frames.compose(self.map_from_world, r.pose)
+        believed = (true_map[0] + e.dx + n[0], true_map[1] + e.dy + n[1], true_map[2] + e.dyaw + n[2])
+        return frames.compose(believed, frames.inverse(r.pose))
 
     # --- blocks -------------------------------------------------------------------
     def add_block(self, name, x, y, yaw, size_x, size_y, color=(255, 0, 0)):

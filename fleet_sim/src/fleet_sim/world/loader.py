@@ -148,7 +148,7 @@ class _Ctx:
         except _Drop as drop:
             if strict:
                 raise WorldError(drop.path, drop.line, drop.reason) from None
-            msg = "%s:%d: %s; %s '%s' dropped" % (drop.path, drop.line, drop.reason, ent.type, ent.kind)
+            msg = "%s:%d: %s; %s %s dropped" % (drop.path, drop.line, drop.reason, ent.type, _label(ent))
             self.world.problems.append(msg)
             self.log("error", msg)
 
@@ -263,6 +263,14 @@ class _Ctx:
             raise _Drop(where, "range must satisfy 0 <= min < max, got [%g %g]" % (rmin, rmax))
         return RangerSpec(name=label, pose=pose, range_min=float(rmin), range_max=float(rmax),
                           fov=math.radians(fov_deg), samples=int(samples), where=ent.where())
+
+
+def _label(ent):
+    """'name' (kind) for log lines, e.g. "'pr2_0' (pr2)" or "(block)" when unnamed."""
+    name = ent.props.get("name")
+    if name is not None and isinstance(name.value, str):
+        return "'%s' (%s)" % (name.value, ent.kind)
+    return "(%s)" % ent.kind
 
 
 # --- property readers: each raises _Drop naming the property ------------------
