@@ -5,7 +5,6 @@ Every flow of DESIGN.md §5.5-§5.11 as the layer and the bridge see it, the bad
 /diagnostics and /rosout, the services, the latched list, the YAML snapshot and a start-up
 failure on a bad parameter. The tests run in name order and build on each other's state.
 """
-import math
 import os
 import re
 import subprocess

@@ -33,7 +33,7 @@ def test_observers_converge_whatever_the_order_and_duplicates(msgs, data):
     for r in observers:
         order = data.draw(st.permutations(msgs))
         dups = data.draw(st.lists(st.sampled_from(msgs), max_size=4))
-        for k, dup in enumerate(dups):  # duplicates at random places
+        for dup in dups:  # duplicates at random places
             order.insert(data.draw(st.integers(0, len(order))), dup)
         for m in order:
             assert r.handler.on_external(m)

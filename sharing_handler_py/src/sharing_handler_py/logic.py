@@ -16,7 +16,7 @@ import logging
 import math
 import uuid as uuidlib
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Tuple
 
 from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
 from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_indexes,

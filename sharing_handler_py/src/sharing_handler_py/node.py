@@ -4,6 +4,7 @@ Runs as robot_N/sharing_handler; every topic and service name is relative to the
 namespace except /diagnostics and the map topic. See the package README for the interface.
 """
 import logging
+import math
 import sys
 import threading
 
@@ -99,6 +100,7 @@ class HandlerNode:
         self._snapshot_written = -1
         self._dropped_reported = 0
         self._map_frame = ""
+        self._list_cache = {}       # uuid -> (cells, metadata, SharedObstacle) of the last list
         self._pub_layer = rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100)
         self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
         self._pub_fleet = rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000)
@@ -200,8 +202,24 @@ class HandlerNode:
         array = SharedObstacleArray()
         array.header.stamp = now
         array.header.frame_id = self._map_frame
-        array.obstacles = [msg_from_obstacle(h.to_obstacle(), now) for h in self.handler.obstacles()]
+        fresh = {}
+        array.obstacles = [self._list_entry(h, now, fresh) for h in self.handler.obstacles()]
+        self._list_cache = fresh
         self._pub_list.publish(array)
+
+    def _list_entry(self, held, now, fresh):
+        """Full-state message of one held obstacle. The message built for the last list is
+        reused while the obstacle's cells and metadata are the same objects/values (publish()
+        serialises at once, so updating the reused message afterwards is safe)."""
+        key = (held.version, held.source, held.rectangle, held.frame_id)
+        cached = self._list_cache.get(held.uuid)
+        if cached is None or cached[0] is not held.cells or cached[1] != key:
+            cached = (held.cells, key, msg_from_obstacle(held.to_obstacle(), now))
+        fresh[held.uuid] = cached
+        msg = cached[2]
+        msg.header.stamp = now
+        msg.deadline = max(1, int(math.ceil(held.remaining)))
+        return msg
 
     def _publish_diagnostics(self):
         counters = self.handler.counters
