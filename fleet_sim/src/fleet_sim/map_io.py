@@ -47,6 +47,11 @@ def load_map_image(image_path, resolution, origin=(0.0, 0.0, 0.0), negate=False,
         raise MapError("%s: resolution must be a number, got %r" % (image_path, resolution)) from None
     if not (resolution > 0 and math.isfinite(resolution)):
         raise MapError("%s: resolution must be > 0, got %r" % (image_path, resolution))
+    try:
+        occupied_thresh, free_thresh = float(occupied_thresh), float(free_thresh)
+    except (TypeError, ValueError):
+        raise MapError("%s: thresholds must be numbers, got %r / %r"
+                       % (image_path, occupied_thresh, free_thresh)) from None
     if mode not in MODES:
         raise MapError("%s: mode must be one of %s, got %r" % (image_path, "/".join(MODES), mode))
     if not (0.0 <= free_thresh < occupied_thresh <= 1.0):

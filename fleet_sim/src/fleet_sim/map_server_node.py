@@ -3,6 +3,11 @@
 Publishes /map (nav_msgs/OccupancyGrid) and /map_metadata latched, serves
 static_map (nav_msgs/GetMap), with ~frame_id (default "map"). A bad file is one
 error line and exit status 1.
+
+With ``<image> <resolution>`` map_server's defaults apply (negate 0,
+occupied_thresh 0.65, free_thresh 0.196, origin [0, 0, 0]); as an extension the
+private parameters ~negate, ~occupied_thresh, ~free_thresh, ~origin and ~mode
+override them (a YAML file always wins, as in map_server).
 """
 import math
 import sys
@@ -12,7 +17,7 @@ from nav_msgs.msg import MapMetaData, OccupancyGrid
 from nav_msgs.srv import GetMap, GetMapResponse
 
 from fleet_sim.errors import MapError
-from fleet_sim.map_io import load_map_args
+from fleet_sim.map_io import load_map_args, load_map_image
 
 
 def to_message(m, frame_id, stamp):
@@ -33,11 +38,19 @@ def to_message(m, frame_id, stamp):
 def main(argv=None):
     argv = rospy.myargv(argv if argv is not None else sys.argv)[1:]
     try:
-        m = load_map_args(argv)
+        m = load_map_args(argv)          # fails before touching ROS on a bad file
     except MapError as err:
         sys.stderr.write("map_server: %s\n" % err)
         return 1
     rospy.init_node("map_server")
+    overrides = {k: rospy.get_param("~" + k) for k in
+                 ("negate", "occupied_thresh", "free_thresh", "origin", "mode") if rospy.has_param("~" + k)}
+    if len(argv) == 2 and overrides:
+        try:
+            m = load_map_image(argv[0], argv[1], **overrides)
+        except (MapError, TypeError) as err:
+            rospy.logfatal("map_server: %s (parameters %s)", err, overrides)
+            return 1
     frame_id = rospy.get_param("~frame_id", "map")
     msg = to_message(m, frame_id, rospy.Time.now())
     meta_pub = rospy.Publisher("map_metadata", MapMetaData, queue_size=1, latch=True)
