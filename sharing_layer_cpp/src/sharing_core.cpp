@@ -58,6 +58,7 @@ SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params
                                      geometry.size_y),
                         FREE_SPACE);
   is_shareable_.assign(geometry.cellCount(), 0);
+  monitored_.assign(geometry.cellCount(), 0);
 }
 
 void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count)
@@ -66,18 +67,17 @@ void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count
                                    params_.static_occupied_cost);
 }
 
-bool SharingCore::insideMonitoredRectangle(std::uint32_t index) const
+void SharingCore::countRectangle(const CellRect& rect, int delta)
 {
-  unsigned int mx = 0, my = 0;
-  geometry().indexToCells(index, mx, my);
-  for (const auto& entry : shared_)
+  const GridGeometry& g = geometry();
+  for (int y = rect.min_y; y <= rect.max_y; ++y)
   {
-    if (entry.second.rectangle_cells.contains(static_cast<int>(mx), static_cast<int>(my)))
+    std::uint16_t* row = monitored_.data() + static_cast<std::size_t>(y) * g.size_x;
+    for (int x = rect.min_x; x <= rect.max_x; ++x)
     {
-      return true;
+      row[x] = static_cast<std::uint16_t>(row[x] + delta);
     }
   }
-  return false;
 }
 
 ScanOutcome SharingCore::processScan(const Observation& observation, double now_s)
@@ -89,7 +89,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
 
   // Only obstacles this scan can reach are monitored; the rest cost one distance test each.
   std::vector<SharedObstacle*> in_view;
-  std::vector<CellRect> watched;
+  ScanWatch watch;
+  watch.mask = monitored_.data();
   if (std::isfinite(ox) && std::isfinite(oy))
   {
     for (auto& entry : shared_)
@@ -98,36 +99,52 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       if (!obstacle.rectangle_cells.empty() && obstacle.rectangle.withinRadius(ox, oy, view_radius))
       {
         in_view.push_back(&obstacle);
-        watched.push_back(obstacle.rectangle_cells);
+        watch.rects.push_back(obstacle.rectangle_cells);
       }
     }
   }
 
   ScanOutcome outcome;
-  outcome.touch = applyScan(obstacles_, observation, params_.limits, watched);
+  outcome.touch = applyScan(obstacles_, observation, params_.limits, watch);
   trackShareable(outcome.touch, observation);
 
+  if (in_view.empty())
+  {
+    return outcome;
+  }
+  std::vector<std::uint32_t> marked_watched;
+  for (std::uint32_t index : outcome.touch.marked)
+  {
+    if (monitored_[index] != 0)
+    {
+      marked_watched.push_back(index);
+    }
+  }
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
     ObstacleUpdate update;
-    for (std::uint32_t index : outcome.touch.marked)
+    // Both lists are sorted: each row of the rectangle is one contiguous index range in them.
+    for (int y = r.min_y; y <= r.max_y; ++y)
     {
-      unsigned int mx = 0, my = 0;
-      g.indexToCells(index, mx, my);
-      if (r.contains(static_cast<int>(mx), static_cast<int>(my)) && !obstacle->cells.isPresent(index) &&
-          !static_filter_.isStatic(index))
+      const std::uint32_t row_first = g.getIndex(static_cast<unsigned int>(r.min_x), static_cast<unsigned int>(y));
+      const std::uint32_t row_last = g.getIndex(static_cast<unsigned int>(r.max_x), static_cast<unsigned int>(y));
+      for (auto it = std::lower_bound(marked_watched.begin(), marked_watched.end(), row_first);
+           it != marked_watched.end() && *it <= row_last; ++it)
       {
-        update.marked.push_back(index);
+        if (!obstacle->cells.isPresent(*it) && !static_filter_.isStatic(*it))
+        {
+          update.marked.push_back(*it);
+        }
       }
-    }
-    for (std::uint32_t index : outcome.touch.watched_cleared)
-    {
-      unsigned int mx = 0, my = 0;
-      g.indexToCells(index, mx, my);
-      if (r.contains(static_cast<int>(mx), static_cast<int>(my)) && obstacle->cells.isPresent(index))
+      for (auto it = std::lower_bound(outcome.touch.watched_cleared.begin(), outcome.touch.watched_cleared.end(),
+                                      row_first);
+           it != outcome.touch.watched_cleared.end() && *it <= row_last; ++it)
       {
-        update.cleared.push_back(index);
+        if (obstacle->cells.isPresent(*it))
+        {
+          update.cleared.push_back(*it);
+        }
       }
     }
     if (update.marked.empty() && update.cleared.empty())
@@ -270,6 +287,7 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
     obstacle.arrival_time = now_s;
     found = shared_.emplace(update.uuid, std::move(obstacle)).first;
     result.added = true;
+    countRectangle(found->second.rectangle_cells, +1);
     // Cells of a new obstacle are not this robot's candidates any more: monitoring takes them over.
     const CellRect& r = found->second.rectangle_cells;
     shareable_.erase(std::remove_if(shareable_.begin(), shareable_.end(),
@@ -302,6 +320,7 @@ bool SharingCore::expire(const std::string& uuid)
     return false;
   }
   markDirty(found->second.cells.present());
+  countRectangle(found->second.rectangle_cells, -1);
   shared_.erase(found);
   return true;
 }

@@ -141,7 +141,7 @@ TEST(ScanUpdate, WatchedRectanglesReportClearedCellsOnlyInside)
   watched.min_y = 1;
   watched.max_y = 3;
   const ScanTouch touch =
-      applyScan(grid, scanFrom(0.05, 0.25, { { 0.85, 0.25, 0.0 }, { 0.05, 0.45, 0.0 } }), limits(2.5, 3.0), { watched });
+      applyScan(grid, scanFrom(0.05, 0.25, { { 0.85, 0.25, 0.0 }, { 0.05, 0.45, 0.0 } }), limits(2.5, 3.0), ScanWatch::fromRects(grid.geometry(), { watched }));
   EXPECT_EQ((std::vector<std::uint32_t>{ 2 * 12 + 4, 2 * 12 + 5, 2 * 12 + 6 }), touch.watched_cleared);
 }
 
@@ -155,7 +155,7 @@ TEST(ScanUpdate, CellClearedByOneBeamAndMarkedByAnotherStaysMarked)
   watched.max_y = 4;
   // The second beam passes through (5, 2), which the first beam hits.
   const ScanTouch touch = applyScan(grid, scanFrom(0.05, 0.25, { { 0.55, 0.25, 0.0 }, { 1.05, 0.25, 0.0 } }),
-                                    limits(2.5, 3.0), { watched });
+                                    limits(2.5, 3.0), ScanWatch::fromRects(grid.geometry(), { watched }));
   EXPECT_EQ(LETHAL_OBSTACLE, grid.at(2 * 12 + 5));
   for (std::uint32_t index : touch.watched_cleared)
   {

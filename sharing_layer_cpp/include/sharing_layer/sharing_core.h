@@ -119,7 +119,8 @@ public:
 private:
   void trackShareable(const ScanTouch& touch, const Observation& observation);
   void markDirty(const std::vector<std::uint32_t>& cells);
-  bool insideMonitoredRectangle(std::uint32_t index) const;
+  bool insideMonitoredRectangle(std::uint32_t index) const { return monitored_[index] != 0; }
+  void countRectangle(const CellRect& rect, int delta);
 
   LayerParams params_;
   CostGrid obstacles_;
@@ -127,6 +128,7 @@ private:
   TriggerDebounce trigger_;
   std::vector<std::uint32_t> shareable_;
   std::vector<std::uint8_t> is_shareable_;
+  std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
   std::map<std::string, SharedObstacle> shared_;
   WorldBounds dirty_;
 };
