@@ -4,10 +4,17 @@ import os
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "src"))
+try:
+    import fleet_sim.errors  # noqa: F401  (the devel space's package, with the generated srv)
+except ImportError:          # not built/sourced: the pure modules from the source tree still work
+    for _name in [m for m in sys.modules if m == "fleet_sim" or m.startswith("fleet_sim.")]:
+        del sys.modules[_name]       # e.g. the repo folder picked up as a namespace package
+    sys.path.insert(0, os.path.join(os.path.dirname(HERE), "src"))
 
 DATA = os.path.join(HERE, "data")
-SHARED = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(HERE))), "shared", "data")
+# The project's reference data: $FLEET_SHARED_DATA, else ../shared/data next to the repo.
+SHARED = os.environ.get("FLEET_SHARED_DATA") or os.path.join(
+    os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))), "shared", "data")
 if not os.path.isdir(SHARED):
     SHARED = "/work/shared/data"
 WILLOW = os.path.join(SHARED, "stage_worlds", "willow", "willow-pr2-multi.world")

@@ -1,7 +1,6 @@
 """map_server semantics of map_io and the map_server script's bad-file exit."""
 import os
 import subprocess
-import sys
 
 import numpy as np
 import pytest

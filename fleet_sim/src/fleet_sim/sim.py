@@ -15,7 +15,7 @@ the floorplan, see ``frames.world_from_map``) with robot i's configurable error
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from typing import List, Tuple
 
 import numpy as np
 

@@ -248,40 +248,62 @@ class SimNode:
         with self.lock:
             stamp = rospy.Time.from_sec(self.sim.time)
             self.clock_pub.publish(Clock(clock=stamp))
-            transforms = []
-            for i, r in enumerate(self.sim.robots):
-                ns = self.names[i]
-                odom = Odometry()
-                odom.header.stamp = stamp
-                odom.header.frame_id = ns + "odom"
-                odom.child_frame_id = ns + "base_link"
-                p = odom.pose.pose
-                p.position.x, p.position.y = r.pose[0], r.pose[1]
-                (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) = _quat(r.pose[2])
-                odom.twist.twist.linear.x, odom.twist.twist.linear.y = r.velocity[0], r.velocity[1]
-                odom.twist.twist.angular.z = r.velocity[2]
-                self.odom_pubs[i].publish(odom)
-                self.gt_pubs[i].publish(odom)   # perfect odometry: ground truth is the same pose
-                transforms.append(_tf(stamp, ns + "odom", ns + "base_link", r.pose))
-                several = len(r.spec.rangers) > 1
-                for k, ranger in enumerate(r.spec.rangers):
-                    link = ns + ("base_laser_link_%d" % k if several else "base_laser_link")
-                    transforms.append(_tf(stamp, ns + "base_link", link, ranger.pose))
-                    if scans and k < len(r.scans):
-                        scan = LaserScan()
-                        scan.header.stamp = stamp
-                        scan.header.frame_id = link
-                        scan.angle_min = ranger.angle_min
-                        scan.angle_max = -ranger.angle_min
-                        scan.angle_increment = ranger.angle_increment
-                        scan.time_increment = 0.0
-                        scan.scan_time = self.sim.dt
-                        scan.range_min = ranger.range_min
-                        scan.range_max = ranger.range_max
-                        scan.ranges = r.scans[k].tolist()
-                        self.scan_pubs[i][k].publish(scan)
-                transforms.append(_tf(stamp, "map", ns + "odom", self.sim.map_to_odom(i)))
-            self.tf_pub.publish(TFMessage(transforms=transforms))
+            out = build_messages(self.sim, self.names, stamp, scans)
+        for i, (odom, scan_msgs) in enumerate(zip(out.odoms, out.scans)):
+            self.odom_pubs[i].publish(odom)
+            self.gt_pubs[i].publish(odom)   # perfect odometry: ground truth is the same pose
+            for k, scan in scan_msgs:
+                self.scan_pubs[i][k].publish(scan)
+        self.tf_pub.publish(out.tf)
+
+
+class Messages:
+    """One step's messages: odoms[i], scans[i] = [(ranger index, LaserScan)], tf."""
+
+    def __init__(self):
+        self.odoms = []
+        self.scans = []
+        self.tf = TFMessage()
+
+
+def build_messages(sim, names, stamp, with_scans):
+    """stage_ros messages for the current state (pure function of the simulation)."""
+    out = Messages()
+    transforms = out.tf.transforms
+    for i, r in enumerate(sim.robots):
+        ns = names[i]
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.header.frame_id = ns + "odom"
+        odom.child_frame_id = ns + "base_link"
+        p = odom.pose.pose
+        p.position.x, p.position.y = r.pose[0], r.pose[1]
+        (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) = _quat(r.pose[2])
+        odom.twist.twist.linear.x, odom.twist.twist.linear.y = r.velocity[0], r.velocity[1]
+        odom.twist.twist.angular.z = r.velocity[2]
+        out.odoms.append(odom)
+        transforms.append(_tf(stamp, ns + "odom", ns + "base_link", r.pose))
+        several = len(r.spec.rangers) > 1
+        scans = []
+        for k, ranger in enumerate(r.spec.rangers):
+            link = ns + ("base_laser_link_%d" % k if several else "base_laser_link")
+            transforms.append(_tf(stamp, ns + "base_link", link, ranger.pose))
+            if with_scans and k < len(r.scans):
+                scan = LaserScan()
+                scan.header.stamp = stamp
+                scan.header.frame_id = link
+                scan.angle_min = ranger.angle_min
+                scan.angle_max = -ranger.angle_min
+                scan.angle_increment = ranger.angle_increment
+                scan.time_increment = 0.0
+                scan.scan_time = sim.dt * sim.laser_every
+                scan.range_min = ranger.range_min
+                scan.range_max = ranger.range_max
+                scan.ranges = r.scans[k].tolist()
+                scans.append((k, scan))
+        out.scans.append(scans)
+        transforms.append(_tf(stamp, "map", ns + "odom", sim.map_to_odom(i)))
+    return out
 
 
 def main():

@@ -21,7 +21,7 @@ line and reason.
 import os
 import re
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple, Union
+from typing import List, Tuple, Union
 
 from fleet_sim.errors import WorldSyntaxError
 
@@ -227,7 +227,7 @@ def _describe(tok):
 BUILTIN_TYPES = frozenset([
     "model", "position", "ranger", "sensor", "laser", "block", "window", "blobfinder",
     "fiducial", "camera", "gripper", "actuator", "lightindicator", "blinkenlight",
-    "bumper", "ptz", "power", "speech", "wifi", "sonar", "fiducialfinder", "blobfinder",
+    "bumper", "ptz", "power", "speech", "wifi", "sonar", "fiducialfinder",
 ])
 
 _MAX_INCLUDE_DEPTH = 32
