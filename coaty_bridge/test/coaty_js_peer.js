@@ -8,18 +8,21 @@
 // deadvertise, discoverAnswered, error.
 "use strict";
 const readline = require("readline");
+const zlib = require("zlib");
 const { Container, MqttBinding, AdvertiseEvent, DiscoverEvent, ResolveEvent } = require("@coaty/core");
 
 const [brokerUrl, namespace, objectType] = process.argv.slice(2);
 const emit = (event) => process.stdout.write(JSON.stringify(event) + "\n");
 const mine = [];
 
-// The bridge's compact index form: base64 of LEB128 varints, first value then gaps.
+// The bridge's compact index form: base64 of LEB128 varints, first value then gaps;
+// with a "z:" prefix the varint bytes are raw-deflated.
 function decodeIndexes(value) {
     if (Array.isArray(value)) {
         return value;
     }
-    const bytes = Buffer.from(value, "base64");
+    const bytes = value.startsWith("z:") ? zlib.inflateRawSync(Buffer.from(value.slice(2), "base64"))
+        : Buffer.from(value, "base64");
     const out = [];
     let current = 0, delta = 0, shift = 0;
     for (const byte of bytes) {

@@ -52,8 +52,9 @@ def coaty_js():
 
 
 def ros_obstacle(source, **fields):
-    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=[2001000, 2001001, 2003005, 3999999],
-               cleared_indexes=[2000999], deadline=90, rectangle_shape=[0.25, 0.5, 1.75, 2.0], source=source,
+    # 64 cells in a row, so the compact form is the deflated one; 3 scattered cleared cells.
+    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=list(range(2001000, 2001064)) + [2003005, 3999999],
+               cleared_indexes=[5, 2000999, 2002999], deadline=90, rectangle_shape=[0.25, 0.5, 1.75, 2.0], source=source,
                resolution=0.05000000074505806, origin_x=-12.5, origin_y=7.25, size_x=2000, size_y=2000,
                version=1, stamp=1700000123.5, frame_id="map")
     msg.update(fields)
@@ -100,6 +101,7 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
                                what="(a) robot_0's obstacle at the Coaty JS peer")
             obj = seen["object"]
             assert obj["objectId"] == mine["uuid"] and obj["source"] == "robot_0" and obj["version"] == 1
+            assert obj["markedIndexes"].startswith("z:") and not obj["clearedIndexes"].startswith("z:")
             assert seen["marked"] == mine["marked_indexes"] and seen["cleared"] == mine["cleared_indexes"]
             assert obj["rectangle"] == mine["rectangle_shape"] and obj["deadline"] == 90
             assert obj["origin"] == [-12.5, 7.25] and obj["size"] == [2000, 2000]

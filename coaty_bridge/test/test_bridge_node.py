@@ -91,7 +91,8 @@ def test_run_broker_publishes_its_url_and_bridges_wait_for_it(ros_graph, observe
     broker = subprocess.Popen([sys.executable, os.path.join(ros_graph.PKG, "scripts", "run_broker"),
                                "__name:=broker", "_port:=0"], env=env, stdout=subprocess.PIPE, text=True)
     ros_graph.nodes.append(broker)
-    node = ros_graph.bridge("robot_3", "broker_url_param:=/fleet/broker_url", "broker_wait:=20.0")
+    node = ros_graph.bridge("robot_3", "broker_url_param:=/fleet/broker_url", "broker_wait:=20.0",
+                            "subscriber_wait:=0.0")
     url = broker.stdout.readline().strip()
     assert url.startswith("mqtt://127.0.0.1:")
     observer = observer_factory(url)

@@ -33,6 +33,27 @@ def test_bad_compact_strings_raise(text, error):
         decode_indexes(text, 300, 100)
 
 
+def test_repetitive_sets_are_deflated_and_decode_the_same():
+    cells = list(range(5000, 5300)) + list(range(9000, 9300, 3))
+    text = encode_indexes(cells)
+    assert text.startswith("z:") and len(text) < 60
+    assert decode_indexes(text, 10000, 1000) == tuple(sorted(cells))
+
+
+def test_deflate_bombs_and_broken_streams_are_rejected():
+    import base64
+    import zlib
+    deflater = zlib.compressobj(9, zlib.DEFLATED, -15)
+    bomb = deflater.compress(b"\x01" * 10 ** 6) + deflater.flush()
+    with pytest.raises(TooManyIndexesError):
+        decode_indexes("z:" + base64.b64encode(bomb).decode(), 2 ** 32, 100)
+    good = encode_indexes(range(0, 600, 2))
+    with pytest.raises(InvalidPayloadError):
+        decode_indexes(good[:-8], 10000, 1000)
+    with pytest.raises(InvalidPayloadError):
+        decode_indexes("z:AAAA", 10000, 1000)
+
+
 def test_count_limit_is_enforced_before_and_while_decoding():
     text = encode_indexes(range(50))
     assert len(decode_indexes(text, 100, 50)) == 50

@@ -74,6 +74,7 @@ class Broker:
                           "log_dest file %s\n"
                           "log_type error\nlog_type warning\nlog_type notice\n"
                           "per_listener_settings false\n"
+                          "set_tcp_nodelay true\n"
                           "allow_anonymous %s\n"
                           "listener %d %s\n"
                           % (self.log_path, "true" if self.allow_anonymous else "false",

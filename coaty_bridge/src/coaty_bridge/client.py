@@ -10,6 +10,7 @@ and counted; the MQTT thread never sees an exception.
 """
 import collections
 import logging
+import socket
 import ssl
 import threading
 import time
@@ -284,6 +285,12 @@ class CoatyBridgeClient:
             LOG.warning("%s: broker %s refused the connection: %s", self.config.robot_name,
                         self.config.broker_url, mqtt.connack_string(rc))
             return
+        sock = client.socket()
+        if sock is not None and hasattr(sock, "setsockopt"):
+            try:  # small events: without this, Nagle + delayed ACK add tens of ms per event
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            except OSError:
+                pass
         client.subscribe(self._subscriptions)
         with self._lock:
             self._connected = True

@@ -122,7 +122,17 @@ class BridgeNode:
         rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self._on_obstacle_list, queue_size=2)
         self._timer = rospy.Timer(rospy.Duration(1.0), self._publish_diagnostics)
 
-    def start(self):
+    def start(self, subscriber_wait):
+        """Connects to the fleet once from_fleet has a subscriber (or after ``subscriber_wait``
+        s): the Resolves that answer our start-up Discover arrive within milliseconds, and
+        a ROS subscriber that is still connecting would miss them."""
+        deadline = rospy.get_time() + subscriber_wait
+        while self.from_fleet.get_num_connections() == 0 and rospy.get_time() < deadline \
+                and not rospy.is_shutdown():
+            rospy.sleep(0.05)
+        if self.from_fleet.get_num_connections() == 0:
+            rospy.logwarn("%s: nobody subscribes from_fleet after %.1f s; connecting anyway",
+                          self.config.robot_name, subscriber_wait)
         self.client.start()
         rospy.loginfo("%s: coaty_bridge agent %s, broker %s, namespace %s, objectType %s",
                       self.config.robot_name, self.client.identity_id, self.config.broker_url,
@@ -196,10 +206,14 @@ def main():
     package_logger.setLevel(logging.INFO)
     try:
         config = read_config()
+        subscriber_wait = rospy.get_param("~subscriber_wait", 10.0)
+        if isinstance(subscriber_wait, bool) or not isinstance(subscriber_wait, (int, float)) \
+                or not 0 <= subscriber_wait <= 3600:
+            raise ValueError("parameter subscriber_wait = %r: must be 0..3600 seconds" % (subscriber_wait,))
     except ValueError as err:
         rospy.logfatal("coaty_bridge: bad parameter: %s", err)
         sys.exit(2)
     node = BridgeNode(config)
     rospy.on_shutdown(node.shutdown)
-    node.start()
+    node.start(float(subscriber_wait))
     rospy.spin()
