@@ -32,8 +32,8 @@ def test_room_snapshot_shows_walls_block_robots_and_rays(tmp_path):
     assert _pixel(img, sim, 1.5, 0.0, 20) != (255, 255, 255)        # a ray between robot and block
     assert (np.all(img == (255, 0, 255), axis=2)).sum() > 50        # laser endpoints
 
-    plain = np.asarray(Image.open(save_png(sim, str(tmp_path / "n.png"), lasers=False,
-                                           pixels_per_metre=20) and str(tmp_path / "n.png")).convert("RGB"))
+    save_png(sim, str(tmp_path / "plain.png"), lasers=False, pixels_per_metre=20)
+    plain = np.asarray(Image.open(str(tmp_path / "plain.png")).convert("RGB"))
     assert _pixel(plain, sim, 1.5, 0.0, 20) == (255, 255, 255)
     assert not np.all(plain == (255, 0, 255), axis=2).any()
 

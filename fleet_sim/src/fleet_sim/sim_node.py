@@ -59,6 +59,18 @@ class _RosoutHandler(logging.Handler):
             rospy.logdebug(msg)
 
 
+def _number_param(name, default, minimum):
+    """A numeric parameter >= minimum, or SimError naming it and its value."""
+    value = rospy.get_param(name, default)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise SimError("parameter %s must be a number, got %r" % (name, value)) from None
+    if not (math.isfinite(number) and number >= minimum):
+        raise SimError("parameter %s must be >= %g, got %r" % (name, minimum, value))
+    return number
+
+
 def _quat(yaw):
     return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
 
@@ -89,14 +101,16 @@ class SimNode:
         if not world.robots:
             rospy.logwarn("%s: the world has no position model (robot)", world_path)
         map_from_world = self._map_from_world(world)
-        self.sim = Simulation(world, seed=int(rospy.get_param("~seed", 0)),
-                              watchdog_timeout=float(rospy.get_param("~watchdog_timeout", 0.2)),
-                              laser_rate=float(rospy.get_param("~laser_rate", 10.0)),
-                              resolution=rospy.get_param("~raycast_resolution", None),
+        default_speedup = world.speedup if world.speedup is not None else 1.0
+        self.speedup = _number_param("~speedup", default_speedup, minimum=0.0)
+        resolution = rospy.get_param("~raycast_resolution", None)
+        self.sim = Simulation(world, seed=int(_number_param("~seed", 0, minimum=0)),
+                              watchdog_timeout=_number_param("~watchdog_timeout", 0.2, minimum=1e-3),
+                              laser_rate=_number_param("~laser_rate", 10.0, minimum=1e-3),
+                              resolution=None if resolution is None else
+                              _number_param("~raycast_resolution", 0.02, minimum=1e-3),
                               map_from_world=map_from_world)
         self._apply_localisation_params()
-        default_speedup = world.speedup if world.speedup is not None else 1.0
-        self.speedup = float(rospy.get_param("~speedup", default_speedup))
         self.lock = threading.Lock()
         prefix = rospy.get_param("~robot_prefix", "robot_%d")
         if rospy.get_param("~single_robot_no_prefix", False) and len(world.robots) == 1:

@@ -1,0 +1,66 @@
+"""The stage_ros messages the node publishes, built without a ROS master."""
+import math
+import os
+
+import pytest
+import rospy
+
+import sim_test_helpers as h
+from fleet_sim.sim import LocalisationError, Simulation
+from fleet_sim.sim_node import SimNode, build_messages
+from fleet_sim.world import load_world
+
+
+def _yaw(q):
+    return 2.0 * math.atan2(q.z, q.w)
+
+
+def _tfs(out):
+    return {(t.header.frame_id, t.child_frame_id): t.transform for t in out.tf.transforms}
+
+
+def test_room_messages_have_stage_ros_names_and_geometry():
+    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None),
+                     raycast=h.raycaster(), localisation={1: LocalisationError(dx=0.2)})
+    sim.set_cmd_vel(0, 0.5, 0.0, 0.1)
+    sim.step()
+    names = [SimNode._prefix("robot_%d", i) for i in range(2)]
+    out = build_messages(sim, names, rospy.Time.from_sec(sim.time), True)
+    odom = out.odoms[0]
+    assert (odom.header.frame_id, odom.child_frame_id) == ("robot_0/odom", "robot_0/base_link")
+    assert odom.header.stamp.to_sec() == pytest.approx(0.1)
+    assert odom.pose.pose.position.x == pytest.approx(sim.robots[0].pose[0])
+    assert _yaw(odom.pose.pose.orientation) == pytest.approx(0.01)
+    assert odom.twist.twist.linear.x == 0.5 and odom.twist.twist.angular.z == 0.1
+    ((k, scan),) = out.scans[0]
+    assert k == 0 and scan.header.frame_id == "robot_0/base_laser_link"
+    assert scan.angle_min == pytest.approx(-math.pi / 2) and scan.angle_max == pytest.approx(math.pi / 2)
+    assert scan.angle_increment == pytest.approx(math.pi / 180)
+    assert (scan.range_min, scan.range_max) == (0.0, 30.0)
+    assert scan.ranges == pytest.approx(sim.robots[0].scans[0].tolist())
+    tfs = _tfs(out)
+    assert set(tfs) == {("robot_0/odom", "robot_0/base_link"), ("robot_0/base_link", "robot_0/base_laser_link"),
+                        ("map", "robot_0/odom"), ("robot_1/odom", "robot_1/base_link"),
+                        ("robot_1/base_link", "robot_1/base_laser_link"), ("map", "robot_1/odom")}
+    assert tfs[("robot_0/base_link", "robot_0/base_laser_link")].translation.x == pytest.approx(0.1)
+    assert tfs[("map", "robot_0/odom")].translation.x == pytest.approx(5.0)
+    assert tfs[("map", "robot_1/odom")].translation.x == pytest.approx(5.2)     # the configured error
+    no_scans = build_messages(sim, names, rospy.Time.from_sec(sim.time), False)
+    assert no_scans.scans == [[], []] and len(no_scans.tf.transforms) == 6
+
+
+def test_several_rangers_and_no_prefix_like_stage_ros():
+    sim = Simulation(load_world(h.SIMPLE, log=lambda *a: None), raycast=h.raycaster())
+    out = build_messages(sim, ["", "r1/"], rospy.Time(0), True)
+    assert [s.header.frame_id for _, s in out.scans[0]] == ["base_laser_link_0", "base_laser_link_1"]
+    assert [len(s.ranges) for _, s in out.scans[0]] == [1, 180]
+    assert ("odom", "base_link") in _tfs(out) and ("r1/odom", "r1/base_link") in _tfs(out)
+    assert SimNode._prefix("", 0) == "" and SimNode._prefix("agv", 3) == "agv3/"
+
+
+def test_willow_map_to_odom_is_the_minus_90_degree_turn():
+    sim = Simulation(load_world(h.WILLOW, log=lambda *a: None), raycast=h.raycaster())
+    out = build_messages(sim, ["robot_0/", "robot_1/"], rospy.Time(0), False)
+    t = _tfs(out)[("map", "robot_0/odom")]
+    assert _yaw(t.rotation) == pytest.approx(-math.pi / 2)
+    assert (t.translation.x, t.translation.y) == pytest.approx((0.0, 0.0), abs=1e-9)
