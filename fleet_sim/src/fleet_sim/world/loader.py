@@ -3,10 +3,10 @@
 What is read (everything else is ignored with a debug line):
 
 - top level: ``resolution`` (raytrace grid, m), ``interval_sim`` (ms), ``speedup``;
-- ``model`` with ``bitmap`` (PNG, PGM or anything Pillow reads, path relative to
-  the file that names it): a floorplan. Stage's rule: a pixel darker than mid-grey
-  is an obstacle; the image is stretched to ``size`` and centred on ``pose``;
-  ``boundary 1`` adds a wall around its edge;
+- ``model`` with ``bitmap`` (PNG, PGM or anything Pillow reads; path relative to
+  the file that names it, else to the world file's folder): a floorplan. Stage's
+  rule: a pixel darker than mid-grey (< 128) is an obstacle; the image is stretched
+  to ``size`` and centred on ``pose``; ``boundary 1`` adds a wall around its edge;
 - ``model`` without bitmap: a solid block of ``size`` at ``pose``. Models with
   ``obstacle_return 0`` are not collided with, with ``ranger_return`` < 0 they are
   invisible to lasers;
@@ -166,6 +166,10 @@ class _Ctx:
             if not isinstance(prop.value, str) or not prop.value:
                 raise _Drop(prop, "bitmap must be a quoted file name, got %r" % (prop.value,))
             bitmap = os.path.normpath(os.path.join(os.path.dirname(prop.path), prop.value))
+            if not os.path.isfile(bitmap):   # Stage resolves against the world file's folder
+                beside_world = os.path.normpath(os.path.join(os.path.dirname(self.world.path), prop.value))
+                if os.path.isfile(beside_world):
+                    bitmap = beside_world
             occupied = _read_bitmap(bitmap, prop)
             self.world.floorplans.append(FloorplanSpec(
                 name=name, pose=pose, size=size, bitmap_path=bitmap, occupied=occupied,
