@@ -3,9 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include <pluginlib/class_list_macros.h>
+#include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/point_cloud2_iterator.h>
-#include <topic_tools/shape_shifter.h>
 
 PLUGINLIB_EXPORT_CLASS(sharing_layer::SharingLayer, costmap_2d::Layer)
 

@@ -10,6 +10,7 @@
 #include <sharing_msgs/SharedObstacle.h>
 #include <std_msgs/Empty.h>
 #include <std_msgs/String.h>
+#include <topic_tools/shape_shifter.h>
 
 #include "sharing_layer/sharing_core.h"
 
