@@ -47,133 +47,9 @@ bool usable(const Point3& p, const ScanLimits& limits, ScanTouch& touch)
   return true;
 }
 
-/// A number in [0, 4) that grows with the direction's angle like atan2 does, without trigonometry.
-inline double pseudoAngle(double dx, double dy)
-{
-  const double p = dx / (std::fabs(dx) + std::fabs(dy));  // in [-1, 1]
-  return dy < 0.0 ? 3.0 + p : 1.0 - p;
-}
-constexpr double kTurn = 4.0;  // a full turn in pseudo-angle units
-
-/// The watched rectangles each beam may cross, found by the beam's direction.
-class AimedRectangles
-{
-public:
-  AimedRectangles(const std::vector<CellRect>& rects, double origin_cx, double origin_cy)
-  {
-    for (std::size_t id = 0; id < rects.size(); ++id)
-    {
-      const CellRect& r = rects[id];
-      // Grown by one cell, so a Bresenham line that grazes the rectangle is never missed.
-      const double x0 = r.min_x - 1.0, y0 = r.min_y - 1.0, x1 = r.max_x + 2.0, y1 = r.max_y + 2.0;
-      if (origin_cx >= x0 && origin_cx <= x1 && origin_cy >= y0 && origin_cy <= y1)
-      {
-        always_.push_back(id);
-        continue;
-      }
-      // The rectangle spans less than half a turn; measure its corners relative to its centre's direction.
-      const double centre = pseudoAngle((x0 + x1) / 2 - origin_cx, (y0 + y1) / 2 - origin_cy);
-      double lo = 0.0, hi = 0.0;
-      const double xs[2] = { x0, x1 }, ys[2] = { y0, y1 };
-      for (double x : xs)
-      {
-        for (double y : ys)
-        {
-          double delta = pseudoAngle(x - origin_cx, y - origin_cy) - centre;
-          delta -= kTurn * std::round(delta / kTurn);
-          lo = std::min(lo, delta);
-          hi = std::max(hi, delta);
-        }
-      }
-      add(centre + lo, centre + hi, id);
-    }
-    std::sort(intervals_.begin(), intervals_.end(),
-              [](const Interval& a, const Interval& b) { return a.lo < b.lo; });
-  }
-
-  bool empty() const { return intervals_.empty() && always_.empty(); }
-
-  /// Appends the ids of the rectangles a beam with this pseudo-angle may cross.
-  void candidates(double angle, std::vector<std::size_t>& ids) const
-  {
-    ids.assign(always_.begin(), always_.end());
-    auto it = std::upper_bound(intervals_.begin(), intervals_.end(), angle,
-                               [](double a, const Interval& iv) { return a < iv.lo; });
-    while (it != intervals_.begin())
-    {
-      --it;
-      if (it->lo < angle - max_width_)
-      {
-        break;
-      }
-      if (angle <= it->hi)
-      {
-        ids.push_back(it->id);
-      }
-    }
-  }
-
-private:
-  struct Interval
-  {
-    double lo, hi;
-    std::size_t id;
-  };
-
-  void add(double lo, double hi, std::size_t id)
-  {
-    // Keep intervals within [0, 4), splitting those that wrap around.
-    if (lo < 0.0)
-    {
-      push(lo + kTurn, kTurn, id);
-      push(0.0, hi, id);
-    }
-    else if (hi > kTurn)
-    {
-      push(lo, kTurn, id);
-      push(0.0, hi - kTurn, id);
-    }
-    else
-    {
-      push(lo, hi, id);
-    }
-  }
-
-  void push(double lo, double hi, std::size_t id)
-  {
-    intervals_.push_back(Interval{ lo, hi, id });
-    max_width_ = std::max(max_width_, hi - lo);
-  }
-
-  std::vector<Interval> intervals_;
-  std::vector<std::size_t> always_;
-  double max_width_ = 0.0;
-};
-
-/// Clears every cell, and records those visited at the given step ranges along the line's dominant axis,
-/// where the line may be inside a watched rectangle: a register compare per cell, no memory access.
-struct ClearAndRecordAction
-{
-  using Range = std::pair<long, long>;
-  std::uint8_t* costs;
-  const std::vector<Range>* ranges;  ///< sorted, disjoint, inclusive
-  std::vector<std::uint32_t>* recorded;
-  std::size_t current = 0;
-  long step = 0;
-  inline void operator()(std::uint32_t offset)
-  {
-    costs[offset] = FREE_SPACE;
-    while (current < ranges->size() && step > (*ranges)[current].second)
-    {
-      ++current;
-    }
-    if (current < ranges->size() && step >= (*ranges)[current].first)
-    {
-      recorded->push_back(offset);
-    }
-    ++step;
-  }
-};
+/// A cost the grid never holds (it holds FREE_SPACE, LETHAL_OBSTACLE and NO_INFORMATION): a watched
+/// cell flagged with it and found FREE_SPACE after the scan was cleared by this scan.
+constexpr std::uint8_t kWatchedFlag = 1;
 
 void sortUnique(std::vector<std::uint32_t>& cells)
 {
@@ -185,19 +61,16 @@ void sortUnique(std::vector<std::uint32_t>& cells)
 ScanWatch ScanWatch::fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects)
 {
   ScanWatch watch;
-  watch.owned_mask_.assign(geometry.cellCount(), 0);
   for (const CellRect& r : rects)
   {
     for (int y = std::max(0, r.min_y); y <= std::min(r.max_y, static_cast<int>(geometry.size_y) - 1); ++y)
     {
       for (int x = std::max(0, r.min_x); x <= std::min(r.max_x, static_cast<int>(geometry.size_x) - 1); ++x)
       {
-        watch.owned_mask_[geometry.getIndex(x, y)] = 1;
+        watch.cells.push_back(geometry.getIndex(x, y));
       }
     }
   }
-  watch.mask = watch.owned_mask_.data();
-  watch.rects = rects;
   return watch;
 }
 
@@ -208,6 +81,26 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   const GridGeometry& g = grid.geometry();
   std::uint8_t* costs = grid.data();
   ScanTouch touch;
+  const std::size_t cell_count = g.cellCount();
+  for (std::uint32_t index : watch.cells)
+  {
+    if (index >= cell_count)
+    {
+      throw std::invalid_argument("applyScan: watched cell " + std::to_string(index) + " outside " + g.describe());
+    }
+  }
+  // Flag the watched cells that are not lethal; lethal ones need no flag, as FREE_SPACE after the scan
+  // can only come from this scan's clearing.
+  std::vector<std::uint8_t> watched_before(watch.cells.size());
+  for (std::size_t i = 0; i < watch.cells.size(); ++i)
+  {
+    std::uint8_t& cost = costs[watch.cells[i]];
+    watched_before[i] = cost;
+    if (cost != LETHAL_OBSTACLE)
+    {
+      cost = kWatchedFlag;
+    }
+  }
 
   const double ox = observation.origin.x;
   const double oy = observation.origin.y;
@@ -220,11 +113,6 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     const double map_end_y = g.endY();
     const unsigned int cell_raytrace_range = g.cellDistance(limits.raytrace_range);
     SetCellAction clear{ costs, FREE_SPACE };
-    const bool watching = !watch.empty();
-    const AimedRectangles aimed(watching ? watch.rects : std::vector<CellRect>(), (ox - g.origin_x) / g.resolution,
-                                (oy - g.origin_y) / g.resolution);
-    std::vector<std::size_t> candidates;
-    std::vector<ClearAndRecordAction::Range> ranges;
 
     for (const Point3& p : observation.points)
     {
@@ -267,60 +155,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         continue;
       }
 
-      ranges.clear();  // steps to record; none unless the beam is aimed at a watched rectangle
-      if (watching)
-      {
-        aimed.candidates(pseudoAngle(wx - ox, wy - oy), candidates);
-        // Steps along the dominant axis at which the line is within a candidate rectangle's extent.
-        const long dx = static_cast<long>(x1) - static_cast<long>(x0);
-        const long dy = static_cast<long>(y1) - static_cast<long>(y0);
-        const bool x_dominant = std::labs(dx) >= std::labs(dy);
-        const long a0 = x_dominant ? x0 : y0;
-        const long direction = (x_dominant ? dx : dy) >= 0 ? 1 : -1;
-        for (std::size_t id : candidates)
-        {
-          const CellRect& r = watch.rects[id];
-          const long lo = (x_dominant ? r.min_x : r.min_y) - 1;
-          const long hi = (x_dominant ? r.max_x : r.max_y) + 1;
-          long k0 = (lo - a0) * direction, k1 = (hi - a0) * direction;
-          if (k0 > k1)
-          {
-            std::swap(k0, k1);
-          }
-          k0 = std::max(k0, 0L);
-          if (k0 > k1)
-          {
-            continue;
-          }
-          ranges.emplace_back(k0, k1);
-        }
-        if (ranges.size() > 1)
-        {
-          std::sort(ranges.begin(), ranges.end());
-          std::size_t kept = 0;
-          for (std::size_t i = 1; i < ranges.size(); ++i)
-          {
-            if (ranges[i].first <= ranges[kept].second + 1)
-            {
-              ranges[kept].second = std::max(ranges[kept].second, ranges[i].second);
-            }
-            else
-            {
-              ranges[++kept] = ranges[i];
-            }
-          }
-          ranges.resize(kept + 1);
-        }
-      }
-      if (!ranges.empty())
-      {
-        ClearAndRecordAction clear_and_record{ costs, &ranges, &touch.watched_cleared };
-        raytraceLine(clear_and_record, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
-      }
-      else
-      {
-        raytraceLine(clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
-      }
+      raytraceLine(clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
     }
   }
 
@@ -356,18 +191,24 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   }
   sortUnique(touch.marked);
 
-  if (!touch.watched_cleared.empty())
+  // Read the flags back: FREE_SPACE means cleared by this scan (a cell marked again is lethal and was not
+  // seen free, as costmap_2d keeps it). Restored in reverse so a duplicate's saved flag is overwritten by
+  // the first occurrence's true cost.
+  for (std::uint32_t index : watch.cells)
   {
-    sortUnique(touch.watched_cleared);
-    // Keep watched cells only; one marked again after clearing in this scan was not seen free (costmap_2d
-    // keeps it lethal).
-    const std::uint16_t* mask = watch.mask;
-    touch.watched_cleared.erase(std::remove_if(touch.watched_cleared.begin(), touch.watched_cleared.end(),
-                                               [costs, mask](std::uint32_t index) {
-                                                 return mask[index] == 0 || costs[index] == LETHAL_OBSTACLE;
-                                               }),
-                                touch.watched_cleared.end());
+    if (costs[index] == FREE_SPACE)
+    {
+      touch.watched_cleared.push_back(index);
+    }
   }
+  for (std::size_t i = watch.cells.size(); i-- > 0;)
+  {
+    if (costs[watch.cells[i]] == kWatchedFlag)
+    {
+      costs[watch.cells[i]] = watched_before[i];
+    }
+  }
+  sortUnique(touch.watched_cleared);
   return touch;
 }
 

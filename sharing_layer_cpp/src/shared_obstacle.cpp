@@ -71,6 +71,7 @@ std::size_t VersionedCellSet::apply(const std::vector<std::uint32_t>& marked,
       found->second = CellState{ version, source_id, false };
     }
   }
+  present_cache_valid_ = present_cache_valid_ && changed == 0;
   return changed;
 }
 
@@ -80,19 +81,23 @@ bool VersionedCellSet::isPresent(std::uint32_t index) const
   return found != cells_.end() && found->second.present;
 }
 
-std::vector<std::uint32_t> VersionedCellSet::present() const
+const std::vector<std::uint32_t>& VersionedCellSet::present() const
 {
-  std::vector<std::uint32_t> cells;
-  cells.reserve(present_count_);
-  for (const auto& entry : cells_)
+  if (!present_cache_valid_)
   {
-    if (entry.second.present)
+    present_cache_.clear();
+    present_cache_.reserve(present_count_);
+    for (const auto& entry : cells_)
     {
-      cells.push_back(entry.first);
+      if (entry.second.present)
+      {
+        present_cache_.push_back(entry.first);
+      }
     }
+    std::sort(present_cache_.begin(), present_cache_.end());
+    present_cache_valid_ = true;
   }
-  std::sort(cells.begin(), cells.end());
-  return cells;
+  return present_cache_;
 }
 
 }  // namespace sharing_layer

@@ -90,7 +90,6 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   // Only obstacles this scan can reach are monitored; the rest cost one distance test each.
   std::vector<SharedObstacle*> in_view;
   ScanWatch watch;
-  watch.mask = monitored_.data();
   if (std::isfinite(ox) && std::isfinite(oy))
   {
     for (auto& entry : shared_)
@@ -99,7 +98,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       if (!obstacle.rectangle_cells.empty() && obstacle.rectangle.withinRadius(ox, oy, view_radius))
       {
         in_view.push_back(&obstacle);
-        watch.rects.push_back(obstacle.rectangle_cells);
+        const std::vector<std::uint32_t>& present = obstacle.cells.present();
+        watch.cells.insert(watch.cells.end(), present.begin(), present.end());
       }
     }
   }

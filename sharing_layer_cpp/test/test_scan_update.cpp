@@ -1,7 +1,9 @@
 // Marking and clearing with costmap_2d ObstacleLayer's rules.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <limits>
 
 #include "ascii_grid.h"
@@ -160,5 +162,63 @@ TEST(ScanUpdate, CellClearedByOneBeamAndMarkedByAnotherStaysMarked)
   for (std::uint32_t index : touch.watched_cleared)
   {
     EXPECT_NE(2u * 12 + 5, index);
+  }
+}
+
+// Watched cells are flagged in the grid during the scan: afterwards every cell must hold exactly what a scan
+// without a watch leaves, whatever the cells held before (free, lethal, unknown) and with duplicates.
+TEST(ScanUpdate, WatchingLeavesTheGridAsAnUnwatchedScanDoes)
+{
+  CostGrid watched_grid = smallGrid();
+  for (std::uint32_t i = 0; i < watched_grid.geometry().cellCount(); ++i)
+  {
+    watched_grid.data()[i] = i % 3 == 0 ? LETHAL_OBSTACLE : (i % 3 == 1 ? NO_INFORMATION : FREE_SPACE);
+  }
+  CostGrid plain_grid = watched_grid;
+  const CostGrid before = watched_grid;
+  ScanWatch watch = ScanWatch::fromRects(watched_grid.geometry(), { CellRect{ 0, 0, 11, 4 } });
+  watch.cells.insert(watch.cells.end(), { 2 * 12 + 5, 2 * 12 + 5, 1 * 12 + 9 });  // duplicates
+  const Observation scan = scanFrom(0.05, 0.25, { { 0.55, 0.25, 0.0 }, { 1.15, 0.05, 0.0 }, { 0.75, 0.45, 0.0 } });
+
+  const ScanTouch watched = applyScan(watched_grid, scan, limits(2.5, 3.0), watch);
+  applyScan(plain_grid, scan, limits(2.5, 3.0));
+
+  for (std::uint32_t i = 0; i < plain_grid.geometry().cellCount(); ++i)
+  {
+    ASSERT_EQ(plain_grid.at(i), watched_grid.at(i)) << "cell " << i;
+  }
+  // Every cell the scan turned free must be reported; a reported cell must end free.
+  std::vector<std::uint32_t> expected;
+  for (std::uint32_t i = 0; i < plain_grid.geometry().cellCount(); ++i)
+  {
+    if (plain_grid.at(i) == FREE_SPACE && before.at(i) != FREE_SPACE)
+    {
+      expected.push_back(i);
+    }
+  }
+  ASSERT_FALSE(expected.empty());
+  for (std::uint32_t i : watched.watched_cleared)
+  {
+    EXPECT_EQ(FREE_SPACE, plain_grid.at(i)) << "cell " << i;
+  }
+  for (std::uint32_t i : expected)
+  {
+    EXPECT_TRUE(std::binary_search(watched.watched_cleared.begin(), watched.watched_cleared.end(), i)) << "cell " << i;
+  }
+  EXPECT_TRUE(std::is_sorted(watched.watched_cleared.begin(), watched.watched_cleared.end()));
+  EXPECT_EQ(std::adjacent_find(watched.watched_cleared.begin(), watched.watched_cleared.end()),
+            watched.watched_cleared.end());
+}
+
+TEST(ScanUpdate, WatchedCellOutsideTheGridIsRefusedAndTheGridUntouched)
+{
+  CostGrid grid = smallGrid(NO_INFORMATION);
+  ScanWatch watch;
+  watch.cells = { 3, 60 };  // the grid has 60 cells
+  EXPECT_THROW(applyScan(grid, scanFrom(0.05, 0.25, { { 0.55, 0.25, 0.0 } }), limits(2.5, 3.0), watch),
+               std::invalid_argument);
+  for (std::uint32_t i = 0; i < 60; ++i)
+  {
+    ASSERT_EQ(NO_INFORMATION, grid.at(i));
   }
 }

@@ -9,23 +9,20 @@
 namespace sharing_layer
 {
 /**
- * @brief Which cells a scan should report when it clears them: the cells of the monitored rectangles.
+ * @brief Which cells a scan should report when it clears them: the present cells of the monitored
+ * obstacles, since only a present cell can be cleared from an obstacle.
  *
- * The mask says per cell whether it is watched; the rectangles let the scan skip, with one angle test,
- * every beam that cannot reach a watched cell, so beams elsewhere pay nothing for monitoring.
+ * The scan flags them in the grid before raytracing and reads them back afterwards, so monitoring
+ * costs two passes over the watched cells and nothing per beam or per cell walked.
  */
 struct ScanWatch
 {
-  const std::uint16_t* mask = nullptr;  ///< non-zero for watched cells, one entry per grid cell
-  std::vector<CellRect> rects;          ///< the watched rectangles (cells), covering every watched cell
+  std::vector<std::uint32_t> cells;  ///< watched cell indexes (duplicates allowed)
 
-  /// @brief A watch over the given rectangles, owning its mask.
+  /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);
 
-  bool empty() const { return mask == nullptr || rects.empty(); }
-
-private:
-  std::vector<std::uint16_t> owned_mask_;
+  bool empty() const { return cells.empty(); }
 };
 
 /**
@@ -38,8 +35,8 @@ private:
  * grid are set to LETHAL_OBSTACLE. Points outside the height limits or not finite are ignored
  * for both.
  *
- * Beams aimed at a watched rectangle also record the watched cells they clear, so a caller can tell
- * which known cells this scan saw free; other beams pay nothing for it.
+ * The watched cells this scan cleared and did not mark again are returned in watched_cleared, so a
+ * caller can tell which known cells this scan saw free. Watched cell indexes must lie in the grid.
  *
  * @throws std::invalid_argument when the limits are invalid (grid left untouched)
  */

@@ -41,8 +41,8 @@ public:
   std::size_t apply(const std::vector<std::uint32_t>& marked, const std::vector<std::uint32_t>& cleared,
                     std::uint64_t version, const std::string& source);
   bool isPresent(std::uint32_t index) const;
-  /// @return the present cells, sorted
-  std::vector<std::uint32_t> present() const;
+  /// @return the present cells, sorted (kept between changes: a scan asks for them every time)
+  const std::vector<std::uint32_t>& present() const;
   std::size_t presentCount() const { return present_count_; }
   /// @return cells with any stamp, tombstones included
   std::size_t trackedCount() const { return cells_.size(); }
@@ -61,6 +61,8 @@ private:
   std::unordered_map<std::uint32_t, CellState> cells_;
   std::vector<std::string> sources_;
   std::size_t present_count_ = 0;
+  mutable std::vector<std::uint32_t> present_cache_;
+  mutable bool present_cache_valid_ = true;  ///< an empty set's cache is right
 };
 
 /// @brief A shared obstacle as one robot holds it.
