@@ -10,6 +10,7 @@ Usage: run_tests.py [--phase gtest|pytest|rostest ...] [-k PYTEST_EXPR]
 import argparse
 import glob
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -72,21 +73,26 @@ def run_gtests(tally):
 
 
 def run_pytest(tally, expr):
-    paths = [p for p in (os.path.join(ROOT, pkg, "test") for pkg in PACKAGES) if os.path.isdir(p)]
-    if not paths:
+    """One pytest process per package, so that one package's broken import or conftest cannot hide
+    another package's results, and test module names only need to be unique within a package."""
+    packages = [pkg for pkg in PACKAGES if os.path.isdir(os.path.join(ROOT, pkg, "test"))]
+    if not packages:
         tally.fail("pytest: no test folders found")
         return
-    xml = os.path.join(RESULTS, "pytest.xml")
-    cmd = [sys.executable, "-m", "pytest", "-q", "-rs", "--junitxml=" + xml,
-           "-p", "no:cacheprovider"] + paths
-    if expr:
-        cmd += ["-k", expr]
-    print("[pytest] %s" % " ".join(os.path.relpath(p, ROOT) for p in paths), flush=True)
-    proc = subprocess.run(cmd, cwd=ROOT)
-    if os.path.exists(xml):
-        tally.add_junit(xml, "pytest")
-    if proc.returncode not in (0, 1, 5):
-        tally.fail("pytest exited %d (usage or internal error)" % proc.returncode)
+    for i, pkg in enumerate(packages, 1):
+        xml = os.path.join(RESULTS, "pytest", pkg + ".xml")
+        if os.path.exists(xml):
+            os.remove(xml)
+        cmd = [sys.executable, "-m", "pytest", "-q", "-rs", "--junitxml=" + xml,
+               "-p", "no:cacheprovider", os.path.join(pkg, "test")]
+        if expr:
+            cmd += ["-k", expr]
+        print("[pytest %d/%d] %s/test" % (i, len(packages), pkg), flush=True)
+        proc = subprocess.run(cmd, cwd=ROOT)
+        if os.path.exists(xml):
+            tally.add_junit(xml, "pytest " + pkg)
+        if proc.returncode not in (0, 1, 5):
+            tally.fail("pytest %s exited %d (usage, collection or internal error)" % (pkg, proc.returncode))
 
 
 def run_rostests(tally):
@@ -99,8 +105,9 @@ def run_rostests(tally):
         return
     for i, path in enumerate(files, 1):
         rel = os.path.relpath(path, ROOT)
-        name = os.path.splitext(os.path.basename(path))[0]
+        name = os.path.splitext(rel)[0].replace(os.sep, "_")
         out_dir = os.path.join(RESULTS, "rostest", name)
+        shutil.rmtree(out_dir, ignore_errors=True)  # a stale result must not count as this run's
         print("[rostest %d/%d] %s" % (i, len(files), rel), flush=True)
         start = time.time()
         proc = subprocess.run(["rostest", "--results-base-dir", out_dir, path], cwd=ROOT)
