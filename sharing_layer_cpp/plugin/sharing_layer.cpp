@@ -135,8 +135,9 @@ void SharingLayer::rebuildCore()
     return;  // the static layer has no map yet; matchSize() calls again
   }
   core_.reset(new SharingCore(masterGeometry(), params_));
-  // The master holds the static layer's costs right after it resized us: they are the a-priori map.
-  core_->setStaticMap(master->getCharMap(), master->getSizeInCellsX() * master->getSizeInCellsY());
+  // LayeredCostmap::resizeMap() blanks the master before calling matchSize(); the static layer writes
+  // its map into the master only in the next updateCosts(), before ours. Take the a-priori map there.
+  static_pending_ = true;
 }
 
 void SharingLayer::matchSize()
@@ -266,7 +267,14 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
   {
     return;
   }
-  // The core's obstacle grid is this layer's data; copy the window, then combine like ObstacleLayer.
+  if (static_pending_ && min_i == 0 && min_j == 0 && max_i >= static_cast<int>(master_grid.getSizeInCellsX()) &&
+      max_j >= static_cast<int>(master_grid.getSizeInCellsY()))
+  {
+    // The layers before us (the static layer) have drawn the whole map: that is the a-priori map.
+    core_->setStaticMap(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY());
+    static_pending_ = false;
+  }
+    // The core's obstacle grid is this layer's data; copy the window, then combine like ObstacleLayer.
   const CostGrid& grid = core_->obstacleGrid();
   const unsigned int size_x = getSizeInCellsX();
   for (int j = min_j; j < max_j; ++j)

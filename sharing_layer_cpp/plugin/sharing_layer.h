@@ -50,6 +50,7 @@ private:
   std::unique_ptr<SharingCore> core_;
   std::mutex core_mutex_;
   bool stuck_pending_ = false;
+  bool static_pending_ = false;  ///< the static map is read from the master at the next full update
   ros::Time stuck_stamp_;
   std::string global_frame_;
   ros::Publisher proposals_pub_;
