@@ -119,7 +119,7 @@ PYBIND11_MODULE(_nav_core, m)
 
   py::class_<GridPlanner>(m, "GridPlanner", "A* on an 8-connected costmap (global_planner cost model)")
       .def(py::init([](double neutral_cost, double cost_factor, int lethal_cost, bool allow_unknown,
-                       int unknown_cost) {
+                       int unknown_cost, unsigned int escape_cells) {
              if (lethal_cost < 1 || lethal_cost > 254)
              {
                throw py::value_error("lethal_cost must be 1..254, got " + std::to_string(lethal_cost));
@@ -134,10 +134,11 @@ PYBIND11_MODULE(_nav_core, m)
              p.lethal_cost = static_cast<std::uint8_t>(lethal_cost);
              p.allow_unknown = allow_unknown;
              p.unknown_cost = static_cast<std::uint8_t>(unknown_cost);
+             p.escape_cells = escape_cells;
              return GridPlanner(p);
            }),
            py::arg("neutral_cost") = 50.0, py::arg("cost_factor") = 3.0, py::arg("lethal_cost") = 253,
-           py::arg("allow_unknown") = true, py::arg("unknown_cost") = 200)
+           py::arg("allow_unknown") = true, py::arg("unknown_cost") = 200, py::arg("escape_cells") = 10)
       .def("make_plan",
            [](GridPlanner& planner, const Grid& costs, std::pair<long, long> start, std::pair<long, long> goal,
               py::object window) {

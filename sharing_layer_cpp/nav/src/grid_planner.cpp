@@ -156,14 +156,19 @@ PlanStatus GridPlanner::makePlan(const std::uint8_t* costs, unsigned int size_x,
     }
     const unsigned int ux = u % size_x, uy = u / size_x;
     // Escaping: a start in the inscribed zone may leave through inscribed (never lethal) cells.
+    const unsigned int sx0 = start % size_x, sy0 = start / size_x;
     const bool escaping = blocked(costs[u]);
+    auto near_start = [&](std::uint32_t i) {
+      const unsigned int ix = i % size_x, iy = i / size_x;
+      return std::max(ix > sx0 ? ix - sx0 : sx0 - ix, iy > sy0 ? iy - sy0 : sy0 - iy) <= params_.escape_cells;
+    };
     auto passable = [&](std::uint32_t i) {
       const std::uint8_t c = costs[i];
       if (!blocked(c))
       {
         return true;
       }
-      return escaping && c < kLethal;
+      return escaping && c < kLethal && near_start(i);
     };
     for (int k = 0; k < 8; ++k)
     {

@@ -208,6 +208,26 @@ TEST(Planner, PrefersCheapCellsAndEscapesInscribedStart)
   EXPECT_EQ(PlanStatus::NoPath, planner.makePlan(costs.data(), sx, sy, 1 * sx + 1, 1 * sx + 4, path));
 }
 
+TEST(Planner, EscapeStaysNearTheStart)
+{
+  // A long inscribed ridge from the start: escaping may use its first cells only.
+  const unsigned int sx = 12, sy = 3;
+  std::vector<std::uint8_t> costs(sx * sy, 254);
+  for (unsigned int x = 0; x < sx; ++x)
+  {
+    costs[1 * sx + x] = 253;
+  }
+  costs[1 * sx + 11] = 0;
+  PlannerParams params;
+  params.escape_cells = 3;
+  GridPlanner planner(params);
+  std::vector<std::uint32_t> path;
+  EXPECT_EQ(PlanStatus::NoPath, planner.makePlan(costs.data(), sx, sy, 1 * sx + 0, 1 * sx + 11, path));
+  params.escape_cells = 20;
+  GridPlanner wide(params);
+  EXPECT_EQ(PlanStatus::Ok, wide.makePlan(costs.data(), sx, sy, 1 * sx + 0, 1 * sx + 11, path));
+}
+
 TEST(Planner, WindowLimitsTheSearch)
 {
   unsigned int sx = 0, sy = 0;

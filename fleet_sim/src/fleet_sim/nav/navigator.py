@@ -49,7 +49,9 @@ class Navigator:
     def __init__(self, params, costmap, planner=None):
         self.params = params
         self.costmap = costmap
-        self.planner = planner or nav.GridPlanner()
+        # A start in the inscribed zone may leave it through inscribed cells within the robot's radius.
+        escape = int(math.ceil(params.inscribed_radius / costmap.geometry.resolution)) + 1
+        self.planner = planner or nav.GridPlanner(escape_cells=escape)
         self.goal = None             # (x, y, yaw)
         self.path = np.zeros(0, dtype=np.uint32)
         self.path_xy = np.zeros((0, 2))

@@ -12,6 +12,7 @@ this robot's view.
 import logging
 import math
 import threading
+import time
 
 import actionlib
 import numpy as np
@@ -167,7 +168,17 @@ class NavNode:
         self.map_msg = msg
 
     def _lookup(self, target, source, stamp, timeout=0.2):
-        t = self.tf_buffer.lookup_transform(target, source, stamp, rospy.Duration(timeout))
+        # The wait is in wall time: under a fast simulated clock a sim-time timeout is over before
+        # the transform published right after the scan has arrived.
+        give_up = time.monotonic() + timeout
+        while True:
+            try:
+                t = self.tf_buffer.lookup_transform(target, source, stamp)
+                break
+            except (tf2_ros.ExtrapolationException, tf2_ros.LookupException):
+                if time.monotonic() >= give_up or rospy.is_shutdown():
+                    raise
+                time.sleep(0.005)
         tr = t.transform
         return tr.translation.x, tr.translation.y, tr.translation.z, _yaw(tr.rotation)
 

@@ -15,6 +15,7 @@ struct PlannerParams
   std::uint8_t lethal_cost = 253;      ///< cells at or above this are not entered (inscribed and lethal)
   bool allow_unknown = true;           ///< unknown (255) cells may be crossed, at unknown_cost
   std::uint8_t unknown_cost = 200;     ///< cell cost assumed for unknown cells when allowed
+  unsigned int escape_cells = 10;      ///< a start in inscribed cells may cross inscribed cells this close to it
 
   /// @throws std::invalid_argument naming the parameter and its value
   void validate() const;
@@ -43,7 +44,8 @@ std::string describe(PlanStatus status);
  * @brief A* on the 8-connected cell grid of a costmap, with global_planner's step cost
  * (neutral_cost + cost_factor * cost) times the step length; diagonal steps never cut the corner of
  * a blocked cell. The start may lie in an inscribed (253) cell: the search may leave through
- * inscribed cells, so a robot pressed against a wall can still plan (never through a lethal cell).
+ * inscribed cells within escape_cells (Chebyshev) of the start, so a robot pressed against a wall
+ * can still plan; never through a lethal cell, and never along a long inscribed ridge.
  * Buffers are kept between calls; one planner per thread.
  */
 class GridPlanner
