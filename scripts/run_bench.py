@@ -1,0 +1,77 @@
+#!/usr/bin/python3
+"""Runs the benchmarks: all of them, or those named.
+
+Usage: run_bench.py [NAME ...]        (make bench, or make bench NAME=core)
+
+Each benchmark prints its figures as it goes (ratios against a baseline measured in the
+same run); the output is also kept in out/bench/NAME.txt. A benchmark exits non-zero when
+it crashed or missed its target; this runner goes on with the others and exits non-zero
+if any did.
+"""
+import os
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEVEL = os.path.join(ROOT, "catkin_ws", "devel")
+OUT = os.path.join(ROOT, "out", "bench")
+
+# name: (command, what it measures)
+BENCHMARKS = {
+    "core": ([os.path.join(DEVEL, "lib", "sharing_layer_cpp", "bench_core")],
+             "sharing layer core: per-scan cost of monitoring vs raytrace + mark"),
+    "bindings": ([sys.executable, os.path.join(ROOT, "sharing_layer_cpp", "scripts", "bench_bindings")],
+                 "pybind11 call overhead as a ratio of process_scan"),
+    "handler": ([sys.executable, os.path.join(ROOT, "sharing_handler_py", "scripts", "bench_handler")],
+                "SharingHandler: updates/s, latency, memory per obstacle"),
+    "bridge": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_bridge")],
+               "Coaty bridge over mosquitto: events/s, latency, compact vs plain bytes"),
+    "sim": ([sys.executable, os.path.join(ROOT, "fleet_sim", "scripts", "bench_sim")],
+            "simulator: real-time factor for 2 and 20 robots"),
+    "nav": ([sys.executable, os.path.join(ROOT, "fleet_sim", "scripts", "bench_nav")],
+            "navigation host: C++ A* and inflation vs a Python/SciPy baseline"),
+    "replay": ([sys.executable, os.path.join(ROOT, "sharing_layer_cpp", "scripts", "bench_replay")],
+               "offline bag replay: real-time factor on a 10-minute two-robot bag"),
+    "fleet": ([sys.executable, os.path.join(ROOT, "tests", "scripts", "bench_fleet")],
+              "fleet benefit: N robots through the facility, sharing on vs off"),
+}
+
+
+def run(name):
+    command, what = BENCHMARKS[name]
+    script = command[-1]
+    print("=== bench %s: %s" % (name, what), flush=True)
+    if not os.path.exists(script):
+        print("bench %s: %s does not exist (not built, or not written yet)" % (name, script), flush=True)
+        return "missing"
+    os.makedirs(OUT, exist_ok=True)
+    log_path = os.path.join(OUT, name + ".txt")
+    start = time.time()
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                universal_newlines=True, bufsize=1)
+        for line in proc.stdout:
+            sys.stdout.write(line)
+            log.write(line)
+        proc.wait()
+    print("=== bench %s: exit %d after %.0f s (output in %s)"
+          % (name, proc.returncode, time.time() - start, os.path.relpath(log_path, ROOT)), flush=True)
+    return "ok" if proc.returncode == 0 else "exit %d" % proc.returncode
+
+
+def main(argv):
+    names = argv or list(BENCHMARKS)
+    unknown = [n for n in names if n not in BENCHMARKS]
+    if unknown:
+        print("run_bench: unknown benchmark(s) %s; known: %s" % (", ".join(unknown), ", ".join(BENCHMARKS)))
+        return 2
+    results = [(name, run(name)) for name in names]
+    print("\nsummary:")
+    for name, result in results:
+        print("  %-9s %s" % (name, result))
+    return 0 if all(result == "ok" for _, result in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
