@@ -10,3 +10,8 @@ fi
 export ROS_IP=127.0.0.1
 export ROS_HOSTNAME=127.0.0.1
 export PYTHONDONTWRITEBYTECODE=1
+# The shared data (real Stage worlds, move_base configs, bags) lives beside the repository.
+if [ -z "${FLEET_SHARED_DATA:-}" ] && [ -d "$REPO_ROOT/../shared/data" ]; then
+  FLEET_SHARED_DATA="$(cd "$REPO_ROOT/../shared/data" && pwd)"
+  export FLEET_SHARED_DATA
+fi
