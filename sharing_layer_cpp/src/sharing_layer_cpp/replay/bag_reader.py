@@ -90,20 +90,19 @@ class BagSource:
         return self.bag.get_end_time()
 
     def _indexed_between(self, topics, after, until):
-        """Messages of `topics` the index places in (after, until]."""
+        """Messages of `topics` the index places in (after, until] (rospy.Time bounds; after may be None)."""
         count = 0
         for conn_id, conn in self.bag._connections.items():
             if conn.topic not in topics:
                 continue
             for entry in self.bag._connection_indexes.get(conn_id, ()):
-                t = entry.time.to_sec()
-                if after < t <= until:
+                if (after is None or entry.time > after) and entry.time <= until:
                     count += 1
         return count
 
     def _chunk_end_after(self, t):
-        """End time of the first chunk that still holds messages after t, or None."""
-        ends = sorted(c.end_time.to_sec() for c in self.bag._chunks if c.end_time.to_sec() > t)
+        """End time (rospy.Time) of the first chunk that ends after t (None: any), or None."""
+        ends = sorted(c.end_time for c in self.bag._chunks if t is None or c.end_time > t)
         return ends[0] if ends else None
 
     # --- reading ----------------------------------------------------------------------------
@@ -115,11 +114,13 @@ class BagSource:
         numpy_topics = set(numpy_topics)
         wanted = set(topics)
         start = None
+        last = None          # rospy.Time of the last message read (exact, to resume after it)
         last_t = float("-inf")
         while True:
             try:
                 gen = self.bag.read_messages(topics=topics, start_time=start, raw=True)
                 for topic, raw, t in gen:
+                    last = t
                     last_t = t.to_sec()
                     datatype, data, _md5, _pos, pytype = raw
                     try:
@@ -137,16 +138,17 @@ class BagSource:
             except GeneratorExit:
                 raise
             except Exception as err:  # noqa: BLE001 - rosbag/roslz4/bz2 raise many types on damage
-                resume = self._chunk_end_after(last_t)
+                resume = self._chunk_end_after(last)
                 if resume is None:
                     self._count("damaged_chunks", note="bag %s: unreadable data after %.3f s (%s: %s); "
                                 "nothing readable follows" % (self.path, last_t, type(err).__name__,
                                                               str(err)[:100]))
                     return
-                lost = self._indexed_between(wanted, last_t, resume)
+                lost = self._indexed_between(wanted, last, resume)
                 self._count("damaged_chunks", note="bag %s: unreadable chunk after %.3f s (%s: %s); "
                             "skipping to %.3f s, %d indexed message(s) of the replayed topics lost"
-                            % (self.path, last_t, type(err).__name__, str(err)[:100], resume, lost))
+                            % (self.path, last_t, type(err).__name__, str(err)[:100], resume.to_sec(), lost))
                 self._count("lost_messages", lost)
-                start = rospy.Time.from_sec(resume) + rospy.Duration(0, 1)
-                last_t = resume
+                start = resume + rospy.Duration(0, 1)
+                last = resume
+                last_t = resume.to_sec()

@@ -137,6 +137,9 @@ def summary_text(summary):
             lines.append("  missing topic: %s" % topic)
         for reason, frames in summary["frames_failed"].items():
             lines.append("  %s: %s" % (reason, ", ".join("%s x%d" % kv for kv in sorted(frames.items()))))
+    for counter, notes in summary["notes"].items():
+        for note in notes[:3]:
+            lines.append("  %s" % note)
     lines.append("exit code: %d" % summary["exit_code"])
     return "\n".join(lines)
 

@@ -205,13 +205,18 @@ class _Robot:
                                 rectangle=Rectangle(*proposal.rectangle), source=self.name,
                                 geometry=self.handler_geometry, version=0, frame_id=replay.settings.global_frame,
                                 stamp=replay.now)
+            # The authorisation's own event is held back so that the file reads proposal, then authorised.
+            replay.hold_events()
             shared = self.handler.on_proposal(obstacle)
+            held = replay.release_events()
             after = self.handler.counters
             outcome = ("authorised" if shared is not None else
                        "redundant" if after["redundant"] > before["redundant"] else "dropped")
             replay.emit("proposal", self.name, uuid=shared.uuid if shared is not None else None,
                         cells=int(cells.size), rectangle=[round(v, 4) for v in proposal.rectangle],
                         robot_xy=[round(rx, 3), round(ry, 3)], outcome=outcome)
+            for record in held:
+                replay.write_event(record)
 
 
 class Replay:
@@ -244,6 +249,7 @@ class Replay:
         self.wall_seconds = 0.0
         self._outbox = collections.deque()
         self._codec = None
+        self._held = None
 
     # --- shared helpers -----------------------------------------------------------------------
     def clock(self):
@@ -266,8 +272,21 @@ class Replay:
         record = {"time": round(self.now, 6), "t": round(self.now - self.start_time, 6), "robot": robot,
                   "event": event}
         record.update(fields)
+        if self._held is not None:
+            self._held.append(record)
+        else:
+            self.write_event(record)
+
+    def write_event(self, record):
         if self.on_event is not None:
             self.on_event(record)
+
+    def hold_events(self):
+        self._held = []
+
+    def release_events(self):
+        held, self._held = self._held or [], None
+        return held
 
     @staticmethod
     def to_core(obstacle, geometry):

@@ -12,7 +12,9 @@ tf2's semantics plus explicit limits:
 - outside the samples: tf2 refuses to extrapolate; we accept the nearest sample when it is at
   most ``tolerance`` seconds away (fake_localization future-dates map->odom by its
   transform_tolerance, and a scan's transform often comes a few ms after it), else
-  ``tf_extrapolation``;
+  ``tf_extrapolation`` before the edge's first sample (tf not started yet) and ``tf_gap``
+  after its last one (the edge stopped: the runner only asks once ``tf_wait`` seconds of bag
+  have passed without a newer sample);
 - static edges (/tf_static) hold for all time;
 - a frame with no path to the target frame is ``tf_unconnected``.
 
@@ -188,8 +190,8 @@ class TransformChain:
         if i == len(times):
             if stamp - times[-1] <= self.tolerance:
                 return edge.values[-1]
-            raise TransformError("tf_extrapolation", "%s -> %s: stamp %.3f is %.3f s after the last sample"
-                                 % (edge.parent, child, stamp, stamp - times[-1]))
+            raise TransformError("tf_gap", "%s -> %s: no sample since %.3f, %.3f s before the stamp %.3f"
+                                 % (edge.parent, child, times[-1], stamp - times[-1], stamp))
         t0, t1 = times[i - 1], times[i]
         if t1 - t0 > self.max_gap:
             # Within the tolerance of one side it is not a gap, just a neighbour.
