@@ -70,7 +70,8 @@ def summarise(replay, bag_path):
             "t": round(rec["time"] - replay.start_time, 3),
             "rectangle": [round(v, 4) for v in rec["rectangle"]], "cells_ever": int(ever.size),
             "cells_final": int(ever.size - len(rec["cleared"])), "cells_near_walls": n_near,
-            "updates": rec["updates"]})
+            "updates": rec["updates"],
+            "final_indexes": sorted(int(c) for c in rec["cell_time"] if c not in rec["cleared"])})
     events = replay.event_counts
     duration = max(0.0, replay.end_time - replay.start_time)
     wall = max(replay.wall_seconds, 1e-9)
