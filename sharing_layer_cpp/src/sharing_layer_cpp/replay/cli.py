@@ -148,11 +148,6 @@ def settings_from_args(args):
 def run(argv=None, stdout=sys.stdout, stderr=sys.stderr):
     """Runs one replay; returns (exit code, summary dict or None)."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=stderr,
-                        format="replay: %(levelname)s: %(message)s")
-    if not args.verbose:
-        # The handler logs one line per drop; the replay counts them in the summary instead.
-        logging.getLogger("sharing_handler_py").setLevel(logging.ERROR)
     from sharing_layer_cpp.replay.bag_reader import BagSource
     from sharing_layer_cpp.replay.config import load_map
     from sharing_layer_cpp.replay.runner import Replay
@@ -210,8 +205,20 @@ def run(argv=None, stdout=sys.stdout, stderr=sys.stderr):
         source.close()
 
 
+def configure_logging(argv):
+    """Warnings (or, with -v, every decision) on stderr. Only the command line does this: run()
+    leaves the process's logging alone, so tests and other callers keep theirs."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
+                        format="replay: %(levelname)s: %(message)s")
+    if not args.verbose:
+        # The handler logs one line per drop; the replay counts them in the summary instead.
+        logging.getLogger("sharing_handler_py").setLevel(logging.ERROR)
+
+
 def main(argv=None):
     try:
+        configure_logging(argv)
         code, _summary = run(argv)
     except KeyboardInterrupt:
         sys.stderr.write("replay: interrupted\n")

@@ -196,10 +196,11 @@ def render_png(replay, path, scale=None):
                 draw.rectangle(box, outline=colour)
             else:
                 draw.rectangle(box, fill=colour)
-        colour = time_colour((rec["time"] - replay.start_time) / duration)
+        # The rectangle in a darker shade of its share-time colour, just outside its cells.
+        colour = tuple(int(v * 0.6) for v in time_colour((rec["time"] - replay.start_time) / duration))
         x0, y1 = px(rec["rectangle"][0], rec["rectangle"][1])
         x1, y0 = px(rec["rectangle"][2], rec["rectangle"][3])
-        draw.rectangle([x0 - 1, y0 - 1, x1 + 1, y1 + 1], outline=colour, width=2)
+        draw.rectangle([x0 - 2, y0 - 2, x1 + 1, y1 + 1], outline=colour, width=1)
         draw.text((x1 + 3, y0), "%s %.0fs" % (uuid[:6], rec["time"] - replay.start_time), fill=colour)
     # Time bar.
     top = img.height + 8
