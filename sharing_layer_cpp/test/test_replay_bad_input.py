@@ -113,6 +113,27 @@ def test_truncated_bag_is_reindexed_in_a_copy_and_replayed_up_to_the_cut(good_lz
     assert "reindexed copy" in text
 
 
+def test_damaged_index_is_rebuilt_and_a_bag_cut_before_its_first_chunk_exits_3(good_lz4, tmp_path):
+    bag = tmp_path / "index.bag"
+    shutil.copyfile(good_lz4, bag)
+    size = os.path.getsize(bag)
+    with open(bag, "r+b") as handle:          # the index records sit at the end of the file
+        handle.seek(size - 300)
+        handle.write(b"\x13" * 200)
+    code, summary, text = replay(bag, tmp_path / "out")
+    assert code & 8, text
+    # Reindexing keeps every chunk it can read whole (here all but, at most, the last one).
+    assert summary["problems"]["bag_unindexed"] == 1 and 250 <= summary["scans_processed"] <= 300
+    first_chunk = chunks(good_lz4)[0][0]
+    cut = tmp_path / "cut.bag"
+    shutil.copyfile(good_lz4, cut)
+    with open(cut, "r+b") as handle:
+        handle.truncate(first_chunk + 100)
+    code, summary, text = replay(cut, tmp_path / "out2")
+    assert code == 3 and summary is None
+    assert "holds no message" in text and "no index" in text
+
+
 def test_corrupted_chunk_is_skipped_with_its_messages_counted(good_lz4, tmp_path):
     bag = tmp_path / "corrupt.bag"
     shutil.copyfile(good_lz4, bag)

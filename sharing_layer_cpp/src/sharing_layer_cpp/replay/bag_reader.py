@@ -1,8 +1,9 @@
 """Reads a bag in timestamp order and keeps going past damage, counting what was lost.
 
-- An unindexed bag (a recorder that was killed, or a truncated file) is reindexed in a
-  temporary copy (rosbag's own reindex, as ``rosbag reindex`` does); the original is never
-  written. What reindexing could not recover is lost and reported.
+- An unindexed bag (a recorder that was killed, or a truncated file) or one whose index cannot
+  be parsed is reindexed in a temporary copy (rosbag's own reindex, as ``rosbag reindex``
+  does); the original is never written. What reindexing could not recover is lost and
+  reported. A bag with no readable message at all is a BagOpenError.
 - Messages are read raw and deserialised here, one by one, so a message whose bytes do not
   parse is counted (``bad_message``) and skipped instead of ending the read.
 - A chunk that cannot be read (bad compression, bad record header) ends rosbag's generator;
@@ -35,12 +36,17 @@ class BagSource:
         try:
             self.bag = rosbag.Bag(path, "r")
         except rosbag.ROSBagUnindexedException:
-            self.bag = self._reindexed_copy(path)
-        except (rosbag.ROSBagException, rosbag.ROSBagFormatException, OSError, ValueError, KeyError,
-                IndexError, EOFError) as err:
-            raise BagOpenError("bag %s cannot be opened: %s: %s" % (path, type(err).__name__, err)) from None
-        except Exception as err:  # rosbag's parser raises struct.error & co. on garbage  # noqa: BLE001
-            raise BagOpenError("bag %s cannot be opened (%s: %s)" % (path, type(err).__name__, err)) from None
+            self.bag = self._reindexed_copy(path, "has no index (truncated or not closed)")
+        except OSError as err:
+            raise BagOpenError("bag %s cannot be opened: %s" % (path, err)) from None
+        except Exception as err:  # noqa: BLE001 - rosbag's parser raises struct.error & co. on garbage
+            # A damaged index (the end of the file): the chunks may still be readable.
+            self.bag = self._reindexed_copy(path, "has a damaged index (%s: %s)" % (type(err).__name__,
+                                                                                   str(err)[:80]))
+        if not self.bag._chunks or not self.bag.get_message_count():
+            why = " (%s)" % self.notes[0] if self.notes else ""
+            self.close()
+            raise BagOpenError("bag %s holds no message%s" % (path, why))
 
     def _count(self, name, n=1, note=None):
         self.problems[name] = self.problems.get(name, 0) + n
@@ -48,7 +54,7 @@ class BagSource:
             self.notes.append(note)
             LOG.warning("%s", note)
 
-    def _reindexed_copy(self, path):
+    def _reindexed_copy(self, path, why):
         self._tmpdir = tempfile.mkdtemp(prefix="replay_reindex_")
         copy = os.path.join(self._tmpdir, os.path.basename(path))
         shutil.copyfile(path, copy)
@@ -60,10 +66,10 @@ class BagSource:
             bag = rosbag.Bag(copy, "r")
         except Exception as err:  # noqa: BLE001 - anything rosbag raises means: not recoverable
             self.close()
-            raise BagOpenError("bag %s has no index and cannot be reindexed (%s: %s)"
-                               % (path, type(err).__name__, err)) from None
-        self._count("bag_unindexed", note="bag %s has no index (truncated or not closed): replaying a "
-                    "reindexed copy; messages after the last complete chunk are lost" % path)
+            raise BagOpenError("bag %s %s and cannot be reindexed (%s: %s)"
+                               % (path, why, type(err).__name__, str(err)[:120])) from None
+        self._count("bag_unindexed", note="bag %s %s: replaying a reindexed copy; messages after the "
+                    "last complete chunk are lost" % (path, why))
         return bag
 
     def close(self):

@@ -184,6 +184,8 @@ def run(argv=None, stdout=sys.stdout, stderr=sys.stderr):
                 replay.run(source)
             except MissingTopicError as err:
                 stderr.write("replay: %s\n" % err)
+                for note in source.notes:
+                    stderr.write("replay: (the bag is damaged: %s)\n" % note)
                 return report.EXIT_NO_SCANS, None
             except InputError as err:
                 stderr.write("replay: %s\n" % err)
