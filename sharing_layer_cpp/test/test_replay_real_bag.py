@@ -4,6 +4,7 @@ What the bag holds (its README): one PR2 in Willow, a 4 m x 0.4 m block closing 
 at map x ~ 23 (not in the map), no local-planner failure at the block (navfn replanned), and
 one move_base/recovery_status at t = 185.7 s near map (34.1, 19.2).
 """
+import glob
 import io
 import json
 import os
@@ -57,3 +58,20 @@ def test_trigger_at_the_block_shares_the_block_and_not_the_walls(tmp_path):
     assert block["rectangle"][1] >= 20.3 and block["rectangle"][3] <= 22.1
     assert block["cells_near_walls"] <= 0.2 * block["cells_ever"]
     assert summary["bytes_compact"] < summary["bytes_plain"]
+
+
+@pytest.mark.parametrize("bag", sorted(glob.glob(os.path.join(DATA, "bags", "*.bag"))) or ["(none)"])
+def test_every_recorded_bag_replays_without_damage(bag, tmp_path):
+    """Any stage_ros-shaped bag dropped into the shared bags folder replays with the defaults."""
+    if not os.path.isfile(bag):
+        pytest.skip("no bags in %s" % os.path.join(DATA, "bags"))
+    import rosbag
+    with rosbag.Bag(bag) as b:
+        scans = sum(i.message_count for i in b.get_type_and_topic_info().topics.values()
+                    if i.msg_type == "sensor_msgs/LaserScan")
+    stdout, stderr = io.StringIO(), io.StringIO()
+    code, summary = cli.run([bag, "--out-dir", str(tmp_path), "--progress", "never", "--no-png"], stdout, stderr)
+    assert summary is not None, stderr.getvalue()
+    assert not code & 8, stdout.getvalue()
+    assert summary["scans_processed"] + summary["scans_dropped"] == scans
+    assert summary["scans_processed"] >= 0.95 * scans, stdout.getvalue()

@@ -97,6 +97,15 @@ class LiveReplay(unittest.TestCase):
         self.client.cancel_all_goals()
         self.stop_recording()
 
+        # record_bag.launch recorded the stage_ros shape and what the sharing nodes said.
+        import rosbag
+        with rosbag.Bag(self.bag) as bag:
+            topics = set(bag.get_type_and_topic_info().topics)
+        for topic in ("/map", "/tf", "/clock", "/robot_0/base_scan", "/robot_0/odom", "/robot_0/stuck_feedback",
+                      "/robot_0/obstacle_proposals", "/robot_0/shared_obstacle_list", "/robot_0/to_fleet"):
+            self.assertIn(topic, topics)
+        self.assertNotIn("/rosout", topics)
+
         stdout, stderr = io.StringIO(), io.StringIO()
         code, summary = cli.run([self.bag, "--out-dir", os.path.join(self.tmp, "replay"), "--progress", "never",
                                  "--params", rospy.get_param("~params_file"),
