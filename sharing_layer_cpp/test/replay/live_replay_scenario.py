@@ -82,7 +82,8 @@ class LiveReplay(unittest.TestCase):
         goal.target_pose.header.frame_id = "map"
         goal.target_pose.header.stamp = rospy.Time.now()
         goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = gx, gy
-        goal.target_pose.pose.orientation.z, goal.target_pose.pose.orientation.w = math.sin(gyaw / 2), math.cos(gyaw / 2)
+        goal.target_pose.pose.orientation.z = math.sin(gyaw / 2)
+        goal.target_pose.pose.orientation.w = math.cos(gyaw / 2)
         self.client.send_goal(goal)
         # Wait for the share, then a few simulated seconds of monitoring while the robot turns away.
         give_up = time.monotonic() + 100.0

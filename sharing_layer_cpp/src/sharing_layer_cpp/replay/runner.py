@@ -18,7 +18,6 @@ would. Nothing here prints; events go to ``on_event`` and counters to ``problems
 """
 import collections
 import logging
-import math
 import random
 import time
 import uuid as uuidlib
@@ -166,7 +165,8 @@ class _Robot:
             self.scans_dropped += 1
             replay.count("scans_" + err.reason)
             replay.count_frame(err.reason, frame)
-            replay.note("scans_" + err.reason, "%s: scan at %.3f (frame %s) dropped: %s" % (self.name, stamp, frame, err))
+            replay.note("scans_" + err.reason, "%s: scan at %.3f (frame %s) dropped: %s"
+                        % (self.name, stamp, frame, err))
             return
         except ValueError as err:
             self.scans_dropped += 1
@@ -401,7 +401,8 @@ class Replay:
             elif name in by_name:
                 targets = [by_name[name]]
             else:
-                raise InputError("--trigger-at names robot %r; robots in the bag: %s" % (name, ", ".join(sorted(by_name))))
+                raise InputError("--trigger-at names robot %r; robots in the bag: %s"
+                                 % (name, ", ".join(sorted(by_name))))
             for robot in targets:
                 self.timed_triggers.append((source.start_time + t, robot))
         self.timed_triggers.sort(key=lambda item: item[0])

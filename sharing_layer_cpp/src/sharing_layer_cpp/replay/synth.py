@@ -10,7 +10,7 @@ start (latched in a real recording), ``/clock``. Nothing here needs a roscore.
 """
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Sequence, Tuple
 
 import numpy as np
 
