@@ -161,3 +161,22 @@ def test_two_robots_share_through_the_fleet_and_expire(tmp_path):
             assert 15.0 <= e["time"] - arrival[e["uuid"]] <= 16.0
     assert summary["expiries"] == 2 * (len(auth0) + len(auth1))
     assert summary["received"] == len(received) + len(by_robot.get(("robot_0", "received"), []))
+
+
+def test_false_shares_next_to_walls_grow_with_the_wall_distance(one_robot, tmp_path):
+    bag, _world = one_robot
+    near = {}
+    for distance in (0, 3, 10, 200):
+        code, summary, _t, _e = replay(bag, tmp_path / str(distance), "--wall-distance", str(distance), "--no-png")
+        assert code == 0
+        fs = summary["false_shares"]
+        assert fs["wall_distance_cells"] == distance and fs["cells"] == summary["cells_shared"]
+        near[distance] = fs["cells_near_walls"]
+        cells = fs["cells"]
+        whole = fs["obstacles_all_near_walls"]
+    # The block's face runs from wall to wall (y 4..8): with a 10-cell distance its ends (0.5 m
+    # each, within the static tolerance of 2 cells already dropped) count; 200 cells covers all.
+    assert near[0] == 0
+    assert near[3] <= near[10] < cells
+    assert 4 <= near[10] <= 25
+    assert near[200] == cells and whole == summary["obstacles_shared"]
