@@ -52,7 +52,9 @@ def test_tutorial_files_load_with_their_values():
     assert params.footprint[0] == pytest.approx((-0.345, -0.345))
     assert params.inscribed_radius == pytest.approx(0.345)
     assert params.max_vel_x == 0.65 and params.xy_goal_tolerance == 0.1
-    assert "local_costmap/width" in unused and "global_costmap/map_type" in unused
+    # The way past a blockage is searched in the local costmap's 6 m x 6 m rolling window.
+    assert params.local_window == 6.0 and "local_costmap/width" not in unused
+    assert "local_costmap/resolution" in unused and "global_costmap/map_type" in unused
     assert "global_costmap/obstacle_range" not in unused
 
 
@@ -102,7 +104,7 @@ def room(block_upper_door=False):
 
 def make(params=None, occ=None):
     params = params or NavParams(robot_radius=0.2, inflation_radius=0.4, planner_frequency=0.5,
-                                 local_window=3.0, max_failures=3)
+                                 local_window=5.0, max_failures=3)
     occ = room() if occ is None else occ
     geometry = core.GridGeometry(RES, 0.0, 0.0, occ.shape[1], occ.shape[0])
     layer = core.LayerParams(obstacle_range=2.5, raytrace_range=3.0, robot_name="robot_0")
@@ -225,3 +227,85 @@ def test_snapshot_draws_shared_obstacles_in_their_colour(tmp_path):
     px = np.asarray(img)
     assert tuple(px[cm.shape[0] - 1 - 10, 10]) == snapshot.SHARED_RGB
     assert (px == snapshot.PLAN_RGB).all(axis=-1).sum() > 50
+
+
+def test_a_blockage_that_fades_after_the_stuck_is_not_reported_again():
+    # After a stop about obstacle_range before a block, turning away erases part of its face
+    # (cells seen between obstacle_range and raytrace_range are cleared, as in costmap_2d). The
+    # navigator remembers the blockage for this goal, so it does not turn back into it.
+    cm, navigator = make()
+    block = (4.5, 0.75, 4.8, 1.85)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    pose, now, events, faded = (1.0, 1.3, 0.0), 0.0, [], False
+    while now < 120.0 and Event.SUCCEEDED not in events and Event.ABORTED not in events:
+        # The laser sees the block's face within obstacle_range (2.5 m).
+        if math.hypot(pose[0] - block[0], pose[1] - 1.3) < 2.5:
+            mark_block(cm, *block, pose)
+        if Event.STUCK in events and not faded:
+            cm.reset_obstacle_layer()              # the whole face is gone from the obstacle layer
+            cm.update(pose[0], pose[1])
+            faded = True
+        pose, now, more = drive(navigator, pose, now, 0.1)
+        events += more
+    assert events.count(Event.STUCK) == 1 and Event.SUCCEEDED in events
+    # A new goal forgets the blockage.
+    cm.reset_obstacle_layer()
+    cm.update(2.0, 1.3)
+    navigator.set_goal(8.0, 1.3, 0.0, now)
+    navigator.tick(now, (2.0, 1.3, 0.0))
+    assert navigator.path_xy[:, 1].max() < 2.5
+
+
+def narrow_door_room(door_width):
+    occ = room()
+    occ[int(0.8 / RES):int(1.8 / RES), 100] = 100
+    lo = int(round((1.3 - door_width / 2) / RES))
+    occ[lo:lo + int(round(door_width / RES)), 100] = 0
+    return occ
+
+
+@pytest.mark.parametrize("margin,lower_door", [(0.1, False), (0.0, True)])
+def test_plans_keep_a_clearance_margin_where_there_is_room(margin, lower_door):
+    # The lower door is 0.6 m: the robot (inscribed 0.2 m) fits, but a scan endpoint one cell in
+    # front of the door frame closes it. With the margin the plan takes the wide upper door.
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, planner_frequency=0.5, local_window=5.0,
+                       max_failures=3, clearance_margin=margin)
+    cm, navigator = make(params, narrow_door_room(0.6))
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    assert Event.PLANNED in navigator.tick(0.0, (2.0, 1.3, 0.0)).events
+    assert (navigator.path_xy[:, 1].max() < 2.5) == lower_door
+
+
+def test_the_only_narrow_way_is_still_planned():
+    occ = narrow_door_room(0.6)
+    occ[int(4.2 / RES):int(5.2 / RES), 100] = 100       # upper door closed
+    cm, navigator = make(occ=occ)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    assert Event.PLANNED in navigator.tick(0.0, (2.0, 1.3, 0.0)).events
+
+
+def test_local_window_comes_from_the_local_costmap_and_must_reach_past_the_lookahead():
+    params, _ = NavParams.from_dict({"local_costmap": {"width": 5.0, "height": 4.5}})
+    assert params.local_window == 4.5
+    with pytest.raises(ParameterError, match=r"local_window \(3.0 m\).*blocked_lookahead \(2.0 m\)"):
+        NavParams.from_dict({"local_costmap": {"width": 3.0, "height": 3.0}})
+
+
+def test_a_stalled_turn_is_escaped_the_other_way_before_it_counts_as_a_failure():
+    # The body touches something the footprint check cannot see (a Stage model larger than the
+    # configured footprint): turning left does not move the robot. The goal is behind it.
+    cm, navigator = make()
+    navigator.set_goal(1.0, 3.0, math.pi, 0.0)
+    pose, now, events, escaped = (3.0, 3.0, 0.0), 0.0, [], False
+    while now < 40.0 and not events:
+        step = navigator.tick(now, pose)
+        events += [e for e in step.events if e is not Event.PLANNED]
+        x, y, yaw = pose
+        if step.linear == 0.0 and step.angular > 0:
+            step.angular = 0.0                       # the stall: the body cannot turn left in place
+        escaped |= navigator.last_command.startswith("escape")
+        pose = (x + step.linear * math.cos(yaw) * 0.1, y + step.linear * math.sin(yaw) * 0.1, yaw + step.angular * 0.1)
+        now += 0.1
+    assert escaped
+    assert events == [Event.SUCCEEDED] and navigator.failures == 0
+    assert now < navigator.params.stuck_timeout

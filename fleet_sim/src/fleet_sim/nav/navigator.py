@@ -9,6 +9,17 @@ blocked it looks for a way past inside a ``local_window`` square around the robo
 to the first free path cell behind the blockage); only when there is none it counts a failure and
 reports ``STUCK`` once, stops, and replans at once. ``max_failures`` failures (stuck, no global
 plan, or no progress for ``stuck_timeout`` seconds) abort the goal.
+
+Plans keep ``clearance_margin`` metres more than the inscribed radius from obstacles where they can
+(a second A* without the margin is the fallback): a passage only just wider than the robot in the
+static map is closed by the first scan whose endpoints fall one cell in front of the mapped wall.
+
+A blockage that made the robot stuck is remembered until the goal ends: the blocked (inscribed or
+lethal) cells of the local window at that moment stay blocked for planning. Without this memory the
+robot oscillates: the obstacle layer clears cells seen between ``obstacle_range`` and
+``raytrace_range`` (costmap_2d semantics), so a robot that stops about obstacle_range before a
+block and turns away erases part of its face, the next periodic replan runs through the block
+again, and the robot reports the same blockage a second time.
 """
 import enum
 import logging
@@ -52,6 +63,10 @@ class Navigator:
         # A start in the inscribed zone may leave it through inscribed cells within the robot's radius.
         escape = int(math.ceil(params.inscribed_radius / costmap.geometry.resolution)) + 1
         self.planner = planner or nav.GridPlanner(escape_cells=escape)
+        margin_cells = (params.inscribed_radius + params.clearance_margin) / costmap.geometry.resolution
+        margin_cost = int(costmap.inflator.cost_at_distance(margin_cells)) if params.clearance_margin > 0 else 253
+        self.margin_planner = (nav.GridPlanner(lethal_cost=max(1, min(253, margin_cost)), escape_cells=escape)
+                               if planner is None and margin_cost < 253 else None)
         self.goal = None             # (x, y, yaw)
         self.path = np.zeros(0, dtype=np.uint32)
         self.path_xy = np.zeros((0, 2))
@@ -62,6 +77,15 @@ class Navigator:
         self.last_progress_time = None
         self.stuck_count = 0         # stuck reports for the current goal
         self.final_rotation = False
+        self.blockages = []          # (x0, y0, x1, y1, mask): remembered blocked cells, current goal
+        self._footprint_edge = None  # footprint outline points (robot frame), for collision checks
+        self.last_command = "none"   # what the controller did last, for failure messages
+        self.stall_ref = None        # pose since which commands have not moved the robot
+        self.stall_since = 0.0
+        self.stall_turn = 0.0
+        self.escapes = 0             # escapes from stalls so far (picks the next kind)
+        self.escape_until = None
+        self.escape_cmd = None
 
     # --- goals --------------------------------------------------------------------------------
     def set_goal(self, x, y, yaw, now):
@@ -71,6 +95,9 @@ class Navigator:
         self.progress = 0
         self.failures = 0
         self.stuck_count = 0
+        self.blockages = []
+        self.escape_until = None
+        self.stall_ref = None
         self.next_plan = now
         self.last_progress_pose = None
         self.last_progress_time = now
@@ -78,6 +105,7 @@ class Navigator:
 
     def cancel(self):
         self.goal = None
+        self.blockages = []
         self.path = np.zeros(0, dtype=np.uint32)
         self.path_xy = np.zeros((0, 2))
 
@@ -99,11 +127,44 @@ class Navigator:
             return False, "the robot (%.2f, %.2f) is outside the costmap" % (pose[0], pose[1])
         if goal is None:
             return False, "the goal is outside the costmap"
-        status, path = self.planner.make_plan(self.costmap.costs, start, goal)
+        status, path = self._make_plan(self.planning_costs(), start, goal)
         if status != nav.PlanStatus.OK:
             return False, nav.describe(status)
         self._set_path(path)
         return True, ""
+
+    def _make_plan(self, costs, start, goal, window=None):
+        """A* with the clearance margin, else without it."""
+        if self.margin_planner is not None:
+            status, path = self.margin_planner.make_plan(costs, start, goal, window)
+            if status == nav.PlanStatus.OK:
+                return status, path
+        return self.planner.make_plan(costs, start, goal, window)
+
+    def planning_costs(self):
+        """The costmap with this goal's remembered blockages set to inscribed (never lowered)."""
+        costs = self.costmap.costs
+        if not self.blockages:
+            return costs
+        costs = costs.copy()
+        for x0, y0, x1, y1, mask in self.blockages:
+            sub = costs[y0:y1, x0:x1]
+            sub[mask & (sub < 253)] = 253
+        return costs
+
+    def _remember_blockage(self, pose):
+        """Keeps the blocked cells of the local window around the robot for the rest of the goal."""
+        cell = self.costmap.world_to_cell(pose[0], pose[1])
+        if cell is None:
+            return
+        x0, y0, x1, y1 = self._window(cell)
+        mask = self.costmap.costs[y0:y1, x0:x1] >= 253
+        mask &= self.costmap.costs[y0:y1, x0:x1] != 255
+        # The robot's own cells stay passable, so it can always plan away from the blockage.
+        r = int(math.ceil(self.params.inscribed_radius * self._cells_per_metre()))
+        cx, cy = cell[0] - x0, cell[1] - y0
+        mask[max(0, cy - r):cy + r + 1, max(0, cx - r):cx + r + 1] = False
+        self.blockages.append((x0, y0, x1, y1, mask))
 
     def _set_path(self, path):
         self.path = path
@@ -125,8 +186,9 @@ class Navigator:
     def _cells_per_metre(self):
         return 1.0 / self.costmap.geometry.resolution
 
-    def _blocked_at(self):
-        """Position in path of the first blocked cell ahead, skipping the robot's own start cells."""
+    def _blocked_at(self, pose):
+        """Position in path of the first blocked cell ahead within blocked_lookahead metres of the
+        robot, or -1; the robot's own start cells are skipped."""
         costs = self.costmap.costs
         flat = costs.reshape(-1)
         start = self.progress
@@ -135,16 +197,26 @@ class Navigator:
                 and start - self.progress < int(self.params.inscribed_radius * self._cells_per_metre()) + 2:
             start += 1
         count = int(self.params.blocked_lookahead * self._cells_per_metre() * 1.5) + 1
-        return nav.first_blocked(costs, self.path, start, count, 253)
+        blocked = nav.first_blocked(costs, self.path, start, count, 253)
+        if blocked >= 0:
+            bx, by = self.path_xy[blocked]
+            if math.hypot(bx - pose[0], by - pose[1]) > self.params.blocked_lookahead:
+                return -1
+        return blocked
+
+    def _window(self, cell):
+        """The local window (local_window metres square) around a cell, clipped to the map."""
+        g = self.costmap.geometry
+        half = int(self.params.local_window / 2.0 * self._cells_per_metre())
+        return (max(0, cell[0] - half), max(0, cell[1] - half),
+                min(g.size_x, cell[0] + half + 1), min(g.size_y, cell[1] + half + 1))
 
     def _way_past(self, pose, blocked_at):
         """A path inside the local window around the blockage, spliced into the global plan."""
         flat = self.costmap.costs.reshape(-1)
         g = self.costmap.geometry
         start = self.costmap.world_to_cell(pose[0], pose[1])
-        half = int(self.params.local_window / 2.0 * self._cells_per_metre())
-        window = (max(0, start[0] - half), max(0, start[1] - half),
-                  min(g.size_x, start[0] + half + 1), min(g.size_y, start[1] + half + 1))
+        window = self._window(start)
         rejoin = None
         for i in range(blocked_at + 1, len(self.path)):
             cell = int(self.path[i])
@@ -155,7 +227,7 @@ class Navigator:
                 rejoin = i
         if rejoin is None:
             return False
-        status, local = self.planner.make_plan(self.costmap.costs, start, (int(self.path[rejoin]) % g.size_x,
+        status, local = self._make_plan(self.planning_costs(), start, (int(self.path[rejoin]) % g.size_x,
                                                                            int(self.path[rejoin]) // g.size_x),
                                                window)
         if status != nav.PlanStatus.OK:
@@ -194,7 +266,7 @@ class Navigator:
         # always reported as a failure, never silently planned around on the same tick.
         if len(self.path):
             self._update_progress(pose)
-        blocked = self._blocked_at() if len(self.path) else -1
+        blocked = self._blocked_at(pose) if len(self.path) else -1
         if blocked >= 0 and not self._way_past(pose, blocked):
             self.stuck_count += 1
             step.events.append(Event.STUCK)
@@ -202,6 +274,7 @@ class Navigator:
             step.reason = ("path blocked at (%.2f, %.2f), %.2f m ahead, and no way past within the %.1f m "
                            "local window" % (bx, by, math.hypot(bx - pose[0], by - pose[1]),
                                              self.params.local_window))
+            self._remember_blockage(pose)
             self.path = np.zeros(0, dtype=np.uint32)
             self.path_xy = np.zeros((0, 2))
             self.next_plan = now      # replan at once on the next tick
@@ -230,14 +303,59 @@ class Navigator:
         elif now - self.last_progress_time > self.params.stuck_timeout:
             self.last_progress_time = now
             self.next_plan = now
-            return self._fail(step, "no progress for %.1f s at (%.2f, %.2f)"
-                              % (self.params.stuck_timeout, pose[0], pose[1]), now)
+            return self._fail(step, "no progress for %.1f s at (%.2f, %.2f); last command %s"
+                              % (self.params.stuck_timeout, pose[0], pose[1], self.last_command), now)
 
-        step.linear, step.angular = self._follow(pose)
+        step.linear, step.angular = self._escape(now, pose) or self._follow(pose)
+        self._watch_motion(now, pose, step.linear, step.angular)
         return step
 
+    # Escapes, tried in turn on successive stalls: (linear, angular sign relative to the stalled turn).
+    ESCAPES = (("turn the other way", 0.0, -1.0), ("creep forward", 0.15, 0.0), ("reverse", None, 0.0))
+
+    def _watch_motion(self, now, pose, v, w):
+        """Notices a stall: commands that move the robot, but for stall_time its pose did not change
+        (the body touches something the footprint check on the costmap did not catch, e.g. a robot
+        model larger than its configured footprint)."""
+        moved = self.stall_ref is None or (math.hypot(pose[0] - self.stall_ref[0], pose[1] - self.stall_ref[1]) > 0.02
+                                           or abs(_wrap(pose[2] - self.stall_ref[2])) > 0.05)
+        if moved or (v == 0.0 and w == 0.0) or self.escape_until is not None:
+            self.stall_ref, self.stall_since, self.stall_turn = pose, now, w
+            return
+        if now - self.stall_since < self.params.stall_time:
+            return
+        kind, lin, sign = self.ESCAPES[self.escapes % len(self.ESCAPES)]
+        self.escapes += 1
+        lin = -abs(self.params.escape_vel) if lin is None else lin
+        ang = sign * math.copysign(min(1.0, self.params.max_rotational_vel), self.stall_turn or 1.0)
+        self.escape_cmd = (kind, lin, ang)
+        self.escape_until = now + self.params.stall_time
+        LOG.info("stalled at (%.2f, %.2f) for %.1f s with %s; escape %d: %s for %.1f s", pose[0], pose[1],
+                 now - self.stall_since, self.last_command, self.escapes, kind, self.params.stall_time)
+
+    def _escape(self, now, pose):
+        """The escape command while one runs, then a replan; None when not escaping."""
+        if self.escape_until is None:
+            return None
+        if now >= self.escape_until:
+            self.escape_until = None
+            self.next_plan = now
+            self.stall_ref = None
+            return None
+        kind, lin, ang = self.escape_cmd
+        if self._collides(pose, lin, ang):
+            return 0.0, 0.0
+        self.last_command = "escape: %s (%.2f m/s, %.2f rad/s)" % (kind, lin, ang)
+        return lin, ang
+
     def _follow(self, pose):
-        """Pure pursuit towards the path point lookahead metres ahead; turn in place when far off."""
+        """Pure pursuit towards the path point lookahead metres ahead; turn in place when far off.
+
+        Pure pursuit cuts corners, and the path only keeps the robot's centre off inscribed cells:
+        each command is checked by rolling the footprint forward ``collision_horizon`` seconds on
+        the costmap; a command that would touch a lethal cell becomes a turn in place, or a slow
+        reverse (like base_local_planner's escape_vel), or a stop.
+        """
         pts = self.path_xy[self.progress:]
         d = np.hypot(pts[:, 0] - pose[0], pts[:, 1] - pose[1])
         ahead = np.nonzero(d >= self.params.lookahead)[0]
@@ -246,8 +364,55 @@ class Navigator:
         err = _wrap(heading - pose[2])
         w = max(-self.params.max_rotational_vel, min(self.params.max_rotational_vel, 2.0 * err))
         if abs(err) > 0.7:
-            return 0.0, w
-        remaining = self.distance_to_goal(pose)
-        v = self.params.max_vel_x * (1.0 - 0.6 * abs(err) / 0.7)
-        v = min(v, max(0.1, 0.8 * remaining))
-        return v, w
+            v = 0.0
+        else:
+            remaining = self.distance_to_goal(pose)
+            v = self.params.max_vel_x * (1.0 - 0.6 * abs(err) / 0.7)
+            v = min(v, max(0.1, 0.8 * remaining))
+            # Slow down before a sharp bend of the path, so the robot turns where the path turns
+            # instead of overshooting into the corner beyond it.
+            near = np.nonzero(d >= 0.3)[0]
+            far = np.nonzero(d >= 1.2)[0]
+            if len(near) and len(far):
+                a, b = pts[near[0]], pts[far[0]]
+                bend = _wrap(math.atan2(b[1] - a[1], b[0] - a[0]) - math.atan2(a[1] - pose[1], a[0] - pose[0]))
+                if abs(bend) > 0.6:
+                    v = min(v, max(0.15, 0.4 * self.params.max_vel_x))
+        for kind, cand_v, cand_w in (("follow", v, w), ("turn in place", 0.0, w),
+                                     ("escape", -abs(self.params.escape_vel), 0.0)):
+            if (cand_v, cand_w) == (0.0, 0.0) or not self._collides(pose, cand_v, cand_w):
+                self.last_command = "%s (%.2f m/s, %.2f rad/s)" % (kind, cand_v, cand_w)
+                return cand_v, cand_w
+        self.last_command = "stop: following (%.2f, %.2f), turning and reversing would all touch an obstacle" % (v, w)
+        return 0.0, 0.0
+
+    def _collides(self, pose, v, w):
+        """Whether the footprint, driven at (v, w) for collision_horizon seconds, meets a lethal cell."""
+        if self._footprint_edge is None:
+            pts = np.asarray(self.params.footprint_polygon, dtype=float)
+            step = self.costmap.geometry.resolution / 2.0
+            edge = []
+            for (x0, y0), (x1, y1) in zip(pts, np.roll(pts, -1, axis=0)):
+                n = max(1, int(math.ceil(math.hypot(x1 - x0, y1 - y0) / step)))
+                t = np.arange(n) / n
+                edge.append(np.column_stack((x0 + t * (x1 - x0), y0 + t * (y1 - y0))))
+            self._footprint_edge = np.concatenate(edge)
+        costs = self.costmap.costs
+        g = self.costmap.geometry
+        x, y, yaw = pose
+        dt = self.params.collision_horizon / 4.0
+        # Step 0 is the pose itself: a robot already touching a lethal cell (a mark on its own
+        # outline) is not held back by it, any command may take it out.
+        for k in range(5):
+            if k:
+                x, y, yaw = x + v * math.cos(yaw) * dt, y + v * math.sin(yaw) * dt, yaw + w * dt
+            c, s = math.cos(yaw), math.sin(yaw)
+            px = x + c * self._footprint_edge[:, 0] - s * self._footprint_edge[:, 1]
+            py = y + s * self._footprint_edge[:, 0] + c * self._footprint_edge[:, 1]
+            cx = np.floor((px - g.origin_x) / g.resolution).astype(np.int64)
+            cy = np.floor((py - g.origin_y) / g.resolution).astype(np.int64)
+            inside = (cx >= 0) & (cy >= 0) & (cx < g.size_x) & (cy < g.size_y)
+            hit = not inside.all() or bool((costs[cy[inside], cx[inside]] == 254).any())
+            if hit:
+                return k > 0
+        return False

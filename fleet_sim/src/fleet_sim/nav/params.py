@@ -105,8 +105,12 @@ class NavParams:
     xy_goal_tolerance: float = 0.2
     yaw_goal_tolerance: float = 0.2
     lookahead: float = 0.6
-    local_window: float = 4.0
+    local_window: float = 6.0
     blocked_lookahead: float = 2.0
+    clearance_margin: float = 0.1
+    collision_horizon: float = 0.5
+    escape_vel: float = -0.1
+    stall_time: float = 1.5
     stuck_timeout: float = 20.0
     max_failures: int = 5
     sharing_enabled: bool = True
@@ -116,10 +120,11 @@ class NavParams:
     def __post_init__(self):
         for name in ("obstacle_range", "raytrace_range", "inflation_radius", "cost_scaling_factor",
                      "robot_radius", "planner_frequency", "xy_goal_tolerance", "yaw_goal_tolerance",
-                     "max_obstacle_height"):
+                     "max_obstacle_height", "clearance_margin"):
             _number(name, getattr(self, name), low=0.0)
         for name in ("update_frequency", "controller_frequency", "max_vel_x", "max_rotational_vel",
-                     "lookahead", "local_window", "blocked_lookahead", "stuck_timeout", "map_wait_log_period"):
+                     "lookahead", "local_window", "blocked_lookahead", "stuck_timeout", "map_wait_log_period",
+                     "collision_horizon", "stall_time"):
             _number(name, getattr(self, name), low=0.0, low_open=True)
         if self.planner_frequency > 0 and not 0.05 <= self.planner_frequency <= 50:
             raise ParameterError("parameter planner_frequency must be 0 (plan on new goals only) or "
@@ -134,6 +139,10 @@ class NavParams:
         if self.local_window < 2 * self.robot_extent:
             raise ParameterError("parameter local_window (%r m) must be at least the robot's width (%r m)"
                                  % (self.local_window, 2 * self.robot_extent))
+        if self.local_window / 2.0 <= self.blocked_lookahead:
+            raise ParameterError("parameter local_window (%r m) must be more than twice blocked_lookahead (%r m), "
+                                 "so that a way past a blockage can be searched beyond it"
+                                 % (self.local_window, self.blocked_lookahead))
 
     @property
     def inscribed_radius(self):
@@ -233,9 +242,20 @@ class NavParams:
         num("max_vel_x", local("max_vel_x", 0.5))
         num("max_rotational_vel", local("max_rotational_vel", 1.0, aliases=("max_rot_vel",)))
         num("xy_goal_tolerance", local("xy_goal_tolerance", 0.2))
+        num("escape_vel", local("escape_vel", -0.1))
+        if values["escape_vel"] > 0:
+            raise ParameterError("parameter escape_vel must be <= 0 (a reverse speed), got %r" % values["escape_vel"])
         num("yaw_goal_tolerance", local("yaw_goal_tolerance", 0.2))
-        for name in ("lookahead", "local_window", "blocked_lookahead", "stuck_timeout", "map_wait_log_period"):
+        for name in ("lookahead", "blocked_lookahead", "clearance_margin", "collision_horizon", "stall_time",
+                     "stuck_timeout", "map_wait_log_period"):
             num(name, take([name], getattr(cls, name)))
+        # The way past a blockage is searched where move_base's local planner would look: the local
+        # costmap's rolling window (the tutorials' 6 m x 6 m), unless ~local_window says otherwise.
+        width, width_key = take(["local_costmap/width"], None)
+        height, height_key = take(["local_costmap/height"], None)
+        window = [_number(k, v, low=0.0, low_open=True) for v, k in ((width, width_key), (height, height_key))
+                  if v is not None]
+        num("local_window", take(["local_window"], min(window) if window else cls.local_window))
         num("max_failures", take(["max_failures"], 5), integer=True)
         flag("sharing_enabled", take(["sharing_enabled"], True))
         sharing = {}
