@@ -309,3 +309,27 @@ def test_a_stalled_turn_is_escaped_the_other_way_before_it_counts_as_a_failure()
     assert escaped
     assert events == [Event.SUCCEEDED] and navigator.failures == 0
     assert now < navigator.params.stuck_timeout
+
+
+def test_going_back_and_forth_without_getting_closer_is_a_failure_and_the_replan_avoids_that_way(caplog):
+    # Something unseen holds the robot in front of the lower door: it moves, but only back and forth.
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    now, k, old_plan = 0.0, 0, None
+    with caplog.at_level("WARNING", logger="fleet_sim.nav.navigator"):
+        while now < navigator.params.stuck_timeout + 5.0 and navigator.failures == 0:
+            pose = (3.0 + (0.15 if k % 20 < 10 else 0.0), 1.3, 0.0)
+            old_plan = navigator.path_xy.copy()
+            navigator.tick(now, pose)
+            now, k = now + 0.1, k + 1
+    assert navigator.failures == 1
+    assert now > navigator.params.stuck_timeout
+    assert "no progress for 20.0 s at (3." in caplog.text and "last command" in caplog.text
+
+    def cells_ahead(plan):
+        d = np.hypot(plan[:, 0] - pose[0], plan[:, 1] - pose[1])
+        return {cm.world_to_cell(x, y) for x, y in plan[(d > 0.4) & (d < 1.4)]}
+    # The next plan does not take the cells ahead it could not make progress along.
+    step = navigator.tick(now, pose)
+    assert Event.PLANNED in step.events
+    assert cells_ahead(old_plan) and not cells_ahead(old_plan) & cells_ahead(navigator.path_xy)

@@ -65,7 +65,8 @@ class Navigator:
         self.planner = planner or nav.GridPlanner(escape_cells=escape)
         margin_cells = (params.inscribed_radius + params.clearance_margin) / costmap.geometry.resolution
         margin_cost = int(costmap.inflator.cost_at_distance(margin_cells)) if params.clearance_margin > 0 else 253
-        self.margin_planner = (nav.GridPlanner(lethal_cost=max(1, min(253, margin_cost)), escape_cells=escape)
+        self.margin_planner = (nav.GridPlanner(lethal_cost=max(1, min(253, margin_cost)),
+                                               escape_cells=int(math.ceil(margin_cells)) + 1)
                                if planner is None and margin_cost < 253 else None)
         self.goal = None             # (x, y, yaw)
         self.path = np.zeros(0, dtype=np.uint32)
@@ -73,7 +74,8 @@ class Navigator:
         self.progress = 0
         self.failures = 0
         self.next_plan = None
-        self.last_progress_pose = None
+        self.best_remaining = None   # shortest remaining plan length so far (progress check)
+        self.last_route_change = -math.inf
         self.last_progress_time = None
         self.stuck_count = 0         # stuck reports for the current goal
         self.final_rotation = False
@@ -99,7 +101,8 @@ class Navigator:
         self.escape_until = None
         self.stall_ref = None
         self.next_plan = now
-        self.last_progress_pose = None
+        self.best_remaining = None
+        self.last_route_change = -math.inf
         self.last_progress_time = now
         self.final_rotation = False
 
@@ -164,6 +167,34 @@ class Navigator:
         r = int(math.ceil(self.params.inscribed_radius * self._cells_per_metre()))
         cx, cy = cell[0] - x0, cell[1] - y0
         mask[max(0, cy - r):cy + r + 1, max(0, cx - r):cx + r + 1] = False
+        self.blockages.append((x0, y0, x1, y1, mask))
+
+    def _remaining(self):
+        """Length of the plan from the robot's place on it to the goal, in metres."""
+        pts = self.path_xy[self.progress:]
+        if len(pts) < 2:
+            return 0.0
+        return float(np.hypot(*np.diff(pts, axis=0).T).sum())
+
+    def _remember_plan_ahead(self, pose, metres=1.5):
+        """After a failure to make progress: the plan's next metres (and the cells beside them)
+        stay blocked for planning until the goal ends."""
+        g = self.costmap.geometry
+        pts = self.path_xy[self.progress:]
+        if len(pts) == 0:
+            return
+        d = np.hypot(pts[:, 0] - pose[0], pts[:, 1] - pose[1])
+        clear = self.params.inscribed_radius + g.resolution     # the robot's own cells stay free
+        ahead = pts[(d > clear) & (d <= metres)]
+        if len(ahead) == 0:
+            return
+        cells = np.array([self.costmap.world_to_cell(x, y) for x, y in ahead])
+        x0, y0 = max(0, cells[:, 0].min() - 1), max(0, cells[:, 1].min() - 1)
+        x1, y1 = min(g.size_x, cells[:, 0].max() + 2), min(g.size_y, cells[:, 1].max() + 2)
+        mask = np.zeros((y1 - y0, x1 - x0), dtype=bool)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                mask[np.clip(cells[:, 1] - y0 + dy, 0, y1 - y0 - 1), np.clip(cells[:, 0] - x0 + dx, 0, x1 - x0 - 1)] = True
         self.blockages.append((x0, y0, x1, y1, mask))
 
     def _set_path(self, path):
@@ -275,6 +306,7 @@ class Navigator:
                            "local window" % (bx, by, math.hypot(bx - pose[0], by - pose[1]),
                                              self.params.local_window))
             self._remember_blockage(pose)
+            self.best_remaining = None
             self.path = np.zeros(0, dtype=np.uint32)
             self.path_xy = np.zeros((0, 2))
             self.next_plan = now      # replan at once on the next tick
@@ -295,16 +327,28 @@ class Navigator:
         if len(self.path) == 0:
             return step
 
-        # No progress for stuck_timeout seconds (e.g. pushing against something unseen).
-        if self.last_progress_pose is None or math.hypot(pose[0] - self.last_progress_pose[0],
-                                                         pose[1] - self.last_progress_pose[1]) > 0.1:
-            self.last_progress_pose = pose
+        # No progress for stuck_timeout seconds: the plan's remaining length did not shrink (pushing
+        # against something unseen, or going back and forth in front of a gap the footprint does
+        # not pass). The plan ahead is then remembered as blocked, so the replan takes another way.
+        # A replan onto a longer route (a shared obstacle arrived) starts the count again, but at most
+        # once per stuck_timeout: plans that flip between two routes are no progress.
+        remaining = self._remaining()
+        if self.best_remaining is None or remaining < self.best_remaining - 0.1:
+            self.best_remaining = remaining
             self.last_progress_time = now
         elif now - self.last_progress_time > self.params.stuck_timeout:
             self.last_progress_time = now
+            self.best_remaining = None
+            reason = ("no progress for %.1f s at (%.2f, %.2f), %.1f m of plan left; last command %s"
+                      % (self.params.stuck_timeout, pose[0], pose[1], remaining, self.last_command))
+            self._remember_plan_ahead(pose)
+            self.path = np.zeros(0, dtype=np.uint32)
+            self.path_xy = np.zeros((0, 2))
             self.next_plan = now
-            return self._fail(step, "no progress for %.1f s at (%.2f, %.2f); last command %s"
-                              % (self.params.stuck_timeout, pose[0], pose[1], self.last_command), now)
+            return self._fail(step, reason, now)
+        elif remaining > self.best_remaining + 1.0 and now - self.last_route_change > self.params.stuck_timeout:
+            self.best_remaining = remaining
+            self.last_route_change = self.last_progress_time = now
 
         step.linear, step.angular = self._escape(now, pose) or self._follow(pose)
         self._watch_motion(now, pose, step.linear, step.angular)
@@ -378,8 +422,14 @@ class Navigator:
                 bend = _wrap(math.atan2(b[1] - a[1], b[0] - a[0]) - math.atan2(a[1] - pose[1], a[0] - pose[0]))
                 if abs(bend) > 0.6:
                     v = min(v, max(0.15, 0.4 * self.params.max_vel_x))
-        for kind, cand_v, cand_w in (("follow", v, w), ("turn in place", 0.0, w),
-                                     ("escape", -abs(self.params.escape_vel), 0.0)):
+        wmax = self.params.max_rotational_vel
+        # Nearest free command to the pursuit one: same speed with more or less turn, then slower.
+        steer = sorted({max(-wmax, min(wmax, w + dw)) for dw in (0.0, 0.25, -0.25, 0.5, -0.5, 1.0, -1.0)},
+                       key=lambda c: abs(c - w))
+        candidates = [("follow", v, w)] if v == 0.0 else \
+            [("follow" if c == w else "steer", lin, c) for lin in (v, min(v, 0.15)) for c in steer]
+        candidates += [("turn in place", 0.0, w), ("escape", -abs(self.params.escape_vel), 0.0)]
+        for kind, cand_v, cand_w in candidates:
             if (cand_v, cand_w) == (0.0, 0.0) or not self._collides(pose, cand_v, cand_w):
                 self.last_command = "%s (%.2f m/s, %.2f rad/s)" % (kind, cand_v, cand_w)
                 return cand_v, cand_w
