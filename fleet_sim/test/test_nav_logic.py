@@ -153,12 +153,12 @@ def test_blocked_door_reports_stuck_once_then_takes_the_other_door():
     cm, navigator = make()
     navigator.set_goal(8.0, 1.3, 0.0, 0.0)
     pose, now, events = (1.0, 1.3, 0.0), 0.0, []
-    while pose[0] < 2.2 and now < 20.0:       # until the door is within obstacle_range (2.5 m)
+    while pose[0] < 2.3 and now < 20.0:       # until the block is within obstacle_range (2.5 m)
         pose, now, more = drive(navigator, pose, now, 0.1)
         events += more
     assert Event.PLANNED in events and Event.STUCK not in events
     # The robot now sees the lower door closed.
-    mark_block(cm, 4.5, 0.75, 4.8, 1.85, pose)
+    mark_block(cm, 4.75, 0.75, 4.95, 1.85, pose)
     pose, now, events = drive(navigator, pose, now, 120.0)
     assert events.count(Event.STUCK) == 1
     assert Event.SUCCEEDED in events
@@ -234,7 +234,7 @@ def test_a_blockage_that_fades_after_the_stuck_is_not_reported_again():
     # (cells seen between obstacle_range and raytrace_range are cleared, as in costmap_2d). The
     # navigator remembers the blockage for this goal, so it does not turn back into it.
     cm, navigator = make()
-    block = (4.5, 0.75, 4.8, 1.85)
+    block = (4.75, 0.75, 4.95, 1.85)
     navigator.set_goal(8.0, 1.3, 0.0, 0.0)
     pose, now, events, faded = (1.0, 1.3, 0.0), 0.0, [], False
     while now < 120.0 and Event.SUCCEEDED not in events and Event.ABORTED not in events:
@@ -333,3 +333,18 @@ def test_going_back_and_forth_without_getting_closer_is_a_failure_and_the_replan
     step = navigator.tick(now, pose)
     assert Event.PLANNED in step.events
     assert cells_ahead(old_plan) and not cells_ahead(old_plan) & cells_ahead(navigator.path_xy)
+
+
+def test_a_block_seen_when_a_replan_is_due_is_a_stuck_not_a_silent_reroute():
+    # The laser marks the block 2.5 m out, the path check looks blocked_lookahead (2 m) ahead: a
+    # periodic replan falling in between must not route around the block without a stuck_feedback.
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    pose, now = (1.0, 1.3, 0.0), 0.0
+    while pose[0] < 2.3 and now < 20.0:
+        pose, now, _ = drive(navigator, pose, now, 0.1)
+    mark_block(cm, 4.75, 0.75, 4.95, 1.85, pose)        # the door is closed 2.3-2.5 m ahead
+    assert navigator._blocked_at(pose, navigator.params.blocked_lookahead) == -1
+    navigator.next_plan = now                           # the periodic replan is due on this tick
+    step = navigator.tick(now, pose)
+    assert step.events == [Event.STUCK]

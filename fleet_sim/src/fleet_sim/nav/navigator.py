@@ -155,12 +155,12 @@ class Navigator:
             sub[mask & (sub < 253)] = 253
         return costs
 
-    def _remember_blockage(self, pose):
-        """Keeps the blocked cells of the local window around the robot for the rest of the goal."""
+    def _remember_blockage(self, pose, window):
+        """Keeps the blocked cells of the window searched for a way past for the rest of the goal."""
         cell = self.costmap.world_to_cell(pose[0], pose[1])
         if cell is None:
             return
-        x0, y0, x1, y1 = self._window(cell)
+        x0, y0, x1, y1 = window
         mask = self.costmap.costs[y0:y1, x0:x1] >= 253
         mask &= self.costmap.costs[y0:y1, x0:x1] != 255
         # The robot's own cells stay passable, so it can always plan away from the blockage.
@@ -217,9 +217,9 @@ class Navigator:
     def _cells_per_metre(self):
         return 1.0 / self.costmap.geometry.resolution
 
-    def _blocked_at(self, pose):
-        """Position in path of the first blocked cell ahead within blocked_lookahead metres of the
-        robot, or -1; the robot's own start cells are skipped."""
+    def _blocked_at(self, pose, distance):
+        """Position in path of the first blocked cell ahead within distance metres of the robot,
+        or -1; the robot's own start cells are skipped."""
         costs = self.costmap.costs
         flat = costs.reshape(-1)
         start = self.progress
@@ -227,13 +227,21 @@ class Navigator:
         while start < len(self.path) and flat[self.path[start]] >= 253 and flat[self.path[start]] != 255 \
                 and start - self.progress < int(self.params.inscribed_radius * self._cells_per_metre()) + 2:
             start += 1
-        count = int(self.params.blocked_lookahead * self._cells_per_metre() * 1.5) + 1
+        count = int(distance * self._cells_per_metre() * 1.5) + 1
         blocked = nav.first_blocked(costs, self.path, start, count, 253)
         if blocked >= 0:
             bx, by = self.path_xy[blocked]
-            if math.hypot(bx - pose[0], by - pose[1]) > self.params.blocked_lookahead:
+            if math.hypot(bx - pose[0], by - pose[1]) > distance:
                 return -1
         return blocked
+
+    def _way_past_window(self, pose, blocked_at):
+        """The local window around the blocked cell, grown to contain the robot."""
+        g = self.costmap.geometry
+        start = self.costmap.world_to_cell(pose[0], pose[1])
+        blocked = int(self.path[blocked_at])
+        x0, y0, x1, y1 = self._window((blocked % g.size_x, blocked // g.size_x))
+        return (min(x0, start[0]), min(y0, start[1]), max(x1, start[0] + 1), max(y1, start[1] + 1))
 
     def _window(self, cell):
         """The local window (local_window metres square) around a cell, clipped to the map."""
@@ -242,12 +250,11 @@ class Navigator:
         return (max(0, cell[0] - half), max(0, cell[1] - half),
                 min(g.size_x, cell[0] + half + 1), min(g.size_y, cell[1] + half + 1))
 
-    def _way_past(self, pose, blocked_at):
-        """A path inside the local window around the blockage, spliced into the global plan."""
+    def _way_past(self, pose, blocked_at, window):
+        """A path inside the window around the blockage, spliced into the global plan."""
         flat = self.costmap.costs.reshape(-1)
         g = self.costmap.geometry
         start = self.costmap.world_to_cell(pose[0], pose[1])
-        window = self._window(start)
         rejoin = None
         for i in range(blocked_at + 1, len(self.path)):
             cell = int(self.path[i])
@@ -294,18 +301,25 @@ class Navigator:
             return step
 
         # The path ahead is checked before any periodic replan, so a blockage the robot runs into is
-        # always reported as a failure, never silently planned around on the same tick.
+        # always reported as a failure, never silently planned around. When a replan is due the
+        # check reaches as far as the robot's own marks can (half the local window), otherwise a
+        # block seen 2-2.5 m ahead would be a silent replan or a stuck depending on timing.
         if len(self.path):
             self._update_progress(pose)
-        blocked = self._blocked_at(pose) if len(self.path) else -1
-        if blocked >= 0 and not self._way_past(pose, blocked):
+        replan_due = self.next_plan is not None and now >= self.next_plan
+        reach = self.params.blocked_lookahead
+        if replan_due:
+            reach = max(reach, self.params.local_window / 2.0 - self.costmap.geometry.resolution)
+        blocked = self._blocked_at(pose, reach) if len(self.path) else -1
+        window = self._way_past_window(pose, blocked) if blocked >= 0 else None
+        if blocked >= 0 and not self._way_past(pose, blocked, window):
             self.stuck_count += 1
             step.events.append(Event.STUCK)
             bx, by = self.path_xy[blocked]
             step.reason = ("path blocked at (%.2f, %.2f), %.2f m ahead, and no way past within the %.1f m "
                            "local window" % (bx, by, math.hypot(bx - pose[0], by - pose[1]),
                                              self.params.local_window))
-            self._remember_blockage(pose)
+            self._remember_blockage(pose, window)
             self.best_remaining = None
             self.path = np.zeros(0, dtype=np.uint32)
             self.path_xy = np.zeros((0, 2))
