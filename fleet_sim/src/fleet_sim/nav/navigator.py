@@ -444,7 +444,11 @@ class Navigator:
             [("follow" if c == w else "steer", lin, c) for lin in (v, min(v, 0.15)) for c in steer]
         candidates += [("turn in place", 0.0, w), ("escape", -abs(self.params.escape_vel), 0.0)]
         for kind, cand_v, cand_w in candidates:
-            if (cand_v, cand_w) == (0.0, 0.0) or not self._collides(pose, cand_v, cand_w):
+            # A turn in place is not held back by the outline check: it cannot take the centre
+            # closer to anything, and a configured footprint larger than the body (the tutorials'
+            # 0.46 m nose on Stage's PR2) would otherwise freeze the robot in every tight junction.
+            # If the body does touch, the stall escape takes over.
+            if cand_v == 0.0 or not self._collides(pose, cand_v, cand_w):
                 self.last_command = "%s (%.2f m/s, %.2f rad/s)" % (kind, cand_v, cand_w)
                 return cand_v, cand_w
         self.last_command = "stop: following (%.2f, %.2f), turning and reversing would all touch an obstacle" % (v, w)
