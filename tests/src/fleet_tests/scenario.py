@@ -1,0 +1,246 @@
+"""What the fleet scenarios (rostests, demo, bench) observe and do, on one ROS master.
+
+A ``Fleet`` records, per robot: stuck events (sim time and true pose), every message the robot's
+handler sends to (``to_fleet``) and gets from (``from_fleet``) its bridge, every plan, the true
+trajectory, and the latest costmap; it sends move_base goals, changes the simulator's blocks and
+reads the handlers' obstacle lists. Only observation: obstacles travel between robots through
+MQTT alone (fleet.launch), the test node never forwards anything.
+"""
+import math
+import os
+import threading
+
+import actionlib
+import rospy
+import yaml
+from actionlib_msgs.msg import GoalStatus
+from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from std_msgs.msg import Empty, String
+
+from fleet_sim.srv import AddBlock, MoveBlock, RemoveBlock, Snapshot
+from sharing_msgs.msg import SharedObstacle
+from sharing_msgs.srv import ListObstacles
+
+STATE_NAMES = {v: k for k, v in GoalStatus.__dict__.items() if k.isupper() and isinstance(v, int)}
+
+
+class ScenarioError(Exception):
+    """A scenario step could not be carried out (bad goal name, service refused, ...)."""
+
+
+def load_facility(path=None):
+    """goals.yaml of fleet_launch: goals, corridors and blocks; a bad file raises ScenarioError."""
+    if path is None:
+        import rospkg
+        path = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "worlds", "goals.yaml")
+    try:
+        with open(path) as f:
+            data = yaml.safe_load(f)
+        goals = {k: tuple(float(v) for v in val) for k, val in data["goals"].items()}
+        corridors = {k: tuple(float(v) for v in val) for k, val in data["corridors"].items()}
+        blocks = data["blocks"]
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+        raise ScenarioError("cannot read the facility description %s: %s" % (path, err)) from None
+    for name, g in goals.items():
+        if len(g) != 3 or not all(math.isfinite(v) for v in g):
+            raise ScenarioError("%s: goal %s must be [x, y, yaw], got %r" % (path, name, g))
+    return {"goals": goals, "corridors": corridors, "blocks": blocks, "path": path}
+
+
+def inside(rect, x, y, margin=0.0):
+    return rect[0] - margin <= x <= rect[2] + margin and rect[1] - margin <= y <= rect[3] + margin
+
+
+def cell_centre(msg, index):
+    """World (x, y) of a costmap cell index of a SharedObstacle's grid."""
+    ix, iy = index % msg.size_x, index // msg.size_x
+    return msg.origin_x + (ix + 0.5) * msg.resolution, msg.origin_y + (iy + 0.5) * msg.resolution
+
+
+class Robot:
+    def __init__(self, fleet, index):
+        self.fleet = fleet
+        self.name = "robot_%d" % index
+        ns = "/" + self.name + "/"
+        self.lock = fleet.lock
+        self.stuck = []          # (sim time, x, y)
+        self.to_fleet = []       # (sim time, SharedObstacle)
+        self.from_fleet = []     # (sim time, SharedObstacle)
+        self.expired = []        # (sim time, uuid)
+        self.plans = []          # (sim time, [(x, y)])
+        self.track = []          # (sim time, x, y) of the true pose, at most every 0.2 s
+        self.costmap = None
+        self.pose = None
+        self.distance = 0.0
+        rospy.Subscriber(ns + "stuck_feedback", Empty, self._on_stuck, queue_size=10)
+        rospy.Subscriber(ns + "to_fleet", SharedObstacle, self._append(self.to_fleet), queue_size=1000)
+        rospy.Subscriber(ns + "from_fleet", SharedObstacle, self._append(self.from_fleet), queue_size=1000)
+        rospy.Subscriber(ns + "expired_obstacles", String, self._on_expired, queue_size=100)
+        rospy.Subscriber(ns + "plan", Path, self._on_plan, queue_size=10)
+        rospy.Subscriber(ns + "base_pose_ground_truth", Odometry, self._on_pose, queue_size=10)
+        rospy.Subscriber(ns + "global_costmap/costmap", OccupancyGrid, self._on_costmap, queue_size=1)
+        self.client = actionlib.SimpleActionClient(ns + "move_base", MoveBaseAction)
+        self.list_srv = rospy.ServiceProxy(ns + "list_obstacles", ListObstacles)
+        self.snapshot_srv = rospy.ServiceProxy(ns + "move_base/snapshot", Snapshot)
+
+    def _append(self, target):
+        def cb(msg):
+            with self.lock:
+                target.append((rospy.get_time(), msg))
+        return cb
+
+    def _on_stuck(self, _msg):
+        with self.lock:
+            x, y = self.pose if self.pose else (float("nan"), float("nan"))
+            self.stuck.append((rospy.get_time(), x, y))
+        rospy.loginfo("scenario: %s stuck at (%.2f, %.2f)", self.name, x, y)
+
+    def _on_expired(self, msg):
+        with self.lock:
+            self.expired.append((rospy.get_time(), msg.data))
+
+    def _on_plan(self, msg):
+        with self.lock:
+            self.plans.append((rospy.get_time(), [(p.pose.position.x, p.pose.position.y) for p in msg.poses]))
+
+    def _on_pose(self, msg):
+        x, y = msg.pose.pose.position.x, msg.pose.pose.position.y
+        t = rospy.get_time()
+        with self.lock:
+            if self.pose is not None:
+                self.distance += math.hypot(x - self.pose[0], y - self.pose[1])
+            self.pose = (x, y)
+            if not self.track or t - self.track[-1][0] >= 0.2:
+                self.track.append((t, x, y))
+
+    def _on_costmap(self, msg):
+        with self.lock:
+            self.costmap = msg
+
+    def wait_ready(self, timeout):
+        if not self.client.wait_for_server(rospy.Duration(timeout)):
+            raise ScenarioError("%s/move_base action server not up after %.0f s" % (self.name, timeout))
+
+    def send(self, goal_name):
+        x, y, yaw = self.fleet.goal(goal_name)
+        goal = MoveBaseGoal()
+        goal.target_pose.header.frame_id = "map"
+        goal.target_pose.header.stamp = rospy.Time.now()
+        goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
+        goal.target_pose.pose.orientation.z = math.sin(yaw / 2.0)
+        goal.target_pose.pose.orientation.w = math.cos(yaw / 2.0)
+        rospy.loginfo("scenario: %s sent to %s (%.2f, %.2f)", self.name, goal_name, x, y)
+        self.client.send_goal(goal)
+        return rospy.get_time()
+
+    def wait(self, timeout):
+        """(finished, state name, status text) after at most timeout s of simulated time."""
+        finished = self.client.wait_for_result(rospy.Duration(timeout))
+        state = self.client.get_state()
+        return finished, STATE_NAMES.get(state, str(state)), self.client.get_goal_status_text()
+
+    def go(self, goal_name, timeout):
+        self.send(goal_name)
+        return self.wait(timeout)
+
+    def obstacles(self):
+        """{uuid: (sorted cells, version, rectangle)} from the handler's list service."""
+        resp = self.list_srv()
+        return {o.uuid: (tuple(sorted(o.marked_indexes)), o.version, tuple(round(v, 3) for v in o.rectangle_shape))
+                for o in resp.obstacles}
+
+    def shares(self):
+        """First shares made by this robot (version 1, source = this robot), in order."""
+        with self.lock:
+            return [(t, m) for t, m in self.to_fleet if m.version == 1 and m.source == self.name]
+
+    def snapshot(self, path):
+        return self.snapshot_srv(path, False, 40.0)
+
+
+class Fleet:
+    def __init__(self, robots=2, facility=None):
+        self.lock = threading.Lock()
+        self.facility = facility or load_facility()
+        self.robots = [Robot(self, i) for i in range(robots)]
+        self._add = rospy.ServiceProxy("/fleet_sim/add_block", AddBlock)
+        self._move = rospy.ServiceProxy("/fleet_sim/move_block", MoveBlock)
+        self._remove = rospy.ServiceProxy("/fleet_sim/remove_block", RemoveBlock)
+        self._snapshot = rospy.ServiceProxy("/fleet_sim/snapshot", Snapshot)
+
+    def goal(self, name):
+        try:
+            return self.facility["goals"][name]
+        except KeyError:
+            raise ScenarioError("unknown goal %r; goals of %s: %s" % (
+                name, self.facility["path"], ", ".join(sorted(self.facility["goals"])))) from None
+
+    def corridor(self, name):
+        try:
+            return self.facility["corridors"][name]
+        except KeyError:
+            raise ScenarioError("unknown corridor %r; corridors: %s" % (
+                name, ", ".join(sorted(self.facility["corridors"])))) from None
+
+    def wait_ready(self, timeout=120.0):
+        for r in self.robots:
+            r.wait_ready(timeout)
+        for s in ("/fleet_sim/add_block", "/fleet_sim/remove_block", "/fleet_sim/snapshot"):
+            rospy.wait_for_service(s, timeout)
+        for r in self.robots:
+            try:
+                rospy.wait_for_service(r.list_srv.resolved_name, timeout)
+            except rospy.ROSException:
+                pass  # sharing off: no handler
+
+    def remove_block(self, name):
+        resp = self._remove(name)
+        if not resp.success:
+            raise ScenarioError("remove_block %s refused: %s" % (name, resp.message))
+        rospy.loginfo("scenario: block %s removed", name)
+
+    def add_block(self, name, x, y, yaw, sx, sy):
+        resp = self._add(name, x, y, yaw, sx, sy)
+        if not resp.success:
+            raise ScenarioError("add_block %s refused: %s" % (name, resp.message))
+        rospy.loginfo("scenario: block %s added at (%.2f, %.2f, %.2f rad)", name, x, y, yaw)
+
+    def world_snapshot(self, path):
+        return self._snapshot(path, True, 40.0)
+
+    def wait_until(self, predicate, timeout, what, period=0.2):
+        """Waits (simulated time) until predicate() is true; raises ScenarioError naming what."""
+        end = rospy.get_time() + timeout
+        while not rospy.is_shutdown():
+            value = predicate()
+            if value:
+                return value
+            if rospy.get_time() > end:
+                raise ScenarioError("timed out after %.0f s of simulated time waiting for %s" % (timeout, what))
+            rospy.sleep(period)
+        raise ScenarioError("shut down while waiting for %s" % what)
+
+    def lists_identical(self):
+        """(identical, per-robot lists) of the handlers' obstacle lists."""
+        lists = [r.obstacles() for r in self.robots]
+        return all(l == lists[0] for l in lists[1:]), lists
+
+
+def entered(points, rect, margin=0.0):
+    """Points (x, y) or (t, x, y) of a path that lie inside rect."""
+    out = []
+    for p in points:
+        x, y = p[-2], p[-1]
+        if inside(rect, x, y, margin):
+            out.append(p)
+    return out
+
+
+def percentile(values, q):
+    if not values:
+        return float("nan")
+    values = sorted(values)
+    k = (len(values) - 1) * q / 100.0
+    lo, hi = int(math.floor(k)), int(math.ceil(k))
+    return values[lo] + (values[hi] - values[lo]) * (k - lo)
