@@ -138,6 +138,7 @@ void SharingLayer::rebuildCore()
   // LayeredCostmap::resizeMap() blanks the master before calling matchSize(); the static layer writes
   // its map into the master only in the next updateCosts(), before ours. Take the a-priori map there.
   static_pending_ = true;
+  pre_static_scans_.clear();
 }
 
 void SharingLayer::matchSize()
@@ -194,7 +195,7 @@ void SharingLayer::expiredCallback(const std_msgs::String::ConstPtr& msg)
   }
 }
 
-void SharingLayer::updateBounds(double robot_x, double robot_y, double /*robot_yaw*/, double* min_x, double* min_y,
+void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw, double* min_x, double* min_y,
                                 double* max_x, double* max_y)
 {
   if (!enabled_)
@@ -214,7 +215,16 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double /*robot_y
   const double now = ros::Time::now().toSec();
   for (const costmap_2d::Observation& observation : observations)
   {
-    const ScanOutcome outcome = core_->processScan(toObservation(observation), now);
+    Observation scan = toObservation(observation);
+    const ScanOutcome outcome = core_->processScan(scan, now);
+    if (static_pending_)
+    {
+      if (pre_static_scans_.size() == kMaxPreStaticScans)
+      {
+        pre_static_scans_.erase(pre_static_scans_.begin());
+      }
+      pre_static_scans_.push_back(std::move(scan));
+    }
     if (!outcome.touch.origin_in_map)
     {
       ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): sensor origin (%.2f, %.2f) is off the map; not clearing",
@@ -253,7 +263,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double /*robot_y
     touch(dirty.min_x, dirty.min_y, min_x, min_y, max_x, max_y);
     touch(dirty.max_x, dirty.max_y, min_x, min_y, max_x, max_y);
   }
-  updateFootprint(robot_x, robot_y, 0.0, min_x, min_y, max_x, max_y);
+  updateFootprint(robot_x, robot_y, robot_yaw, min_x, min_y, max_x, max_y);
 }
 
 void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, int min_j, int max_i, int max_j)
@@ -273,8 +283,25 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
     // The layers before us (the static layer) have drawn the whole map: that is the a-priori map.
     core_->setStaticMap(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY());
     static_pending_ = false;
+    // Scans that came between the new core and this update (a map that arrives or changes size while
+    // the sensors run) made wall cells shareable, and a wall seen on every scan never leaves that set.
+    // Clear the obstacle grid and the shareable cells (shared obstacles stay) and replay those scans
+    // through the static filter.
+    if (!pre_static_scans_.empty())
+    {
+      core_->resetObstacleLayer();
+      const double now = ros::Time::now().toSec();
+      for (const Observation& scan : pre_static_scans_)
+      {
+        for (const ObstacleUpdate& update : core_->processScan(scan, now).updates)
+        {
+          updates_pub_.publish(toMessage(update, global_frame_));
+        }
+      }
+      pre_static_scans_.clear();
+    }
   }
-    // The core's obstacle grid is this layer's data; copy the window, then combine like ObstacleLayer.
+  // The core's obstacle grid is this layer's data; copy the window, then combine like ObstacleLayer.
   const CostGrid& grid = core_->obstacleGrid();
   const unsigned int size_x = getSizeInCellsX();
   for (int j = min_j; j < max_j; ++j)

@@ -4,6 +4,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include <costmap_2d/obstacle_layer.h>
 #include <ros/ros.h>
@@ -51,6 +52,10 @@ private:
   std::mutex core_mutex_;
   bool stuck_pending_ = false;
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
+  /// Scans processed while static_pending_: their cells were judged shareable without the static map
+  /// (walls too), so they are replayed once it is read. At most kMaxPreStaticScans, the newest.
+  std::vector<Observation> pre_static_scans_;
+  static constexpr std::size_t kMaxPreStaticScans = 100;
   ros::Time stuck_stamp_;
   std::string global_frame_;
   ros::Publisher proposals_pub_;
