@@ -1,0 +1,96 @@
+#!/usr/bin/python3
+"""Test 2 of the thesis (DESIGN.md §8), node of test2_clear.test: clear and share the update.
+
+block_middle is taken away first so that robot_0 shares block_right alone. robot_0 drives to
+orange (stuck once at block_right, which it shares), then to purple, where it looks down the right
+corridor at the block. The block is removed while in its view: robot_0 sends an update of that
+obstacle with the cleared cells, and both robots then hold the same cells for it. robot_1, sent to
+purple, plans and drives straight up the right corridor with no stuck event. Both robots' obstacle
+lists are identical at the end.
+"""
+import os
+import tempfile
+import unittest
+
+import rospy
+import rostest
+
+from fleet_tests.scenario import Fleet, entered
+
+
+class Test2Clear(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test2_clear")
+        cls.fleet = Fleet(2)
+        cls.fleet.wait_ready(120.0)
+
+    def pictures(self, name):
+        folder = os.environ.get("ROS_TEST_RESULTS_DIR") or tempfile.gettempdir()
+        out = [r.snapshot(os.path.join(folder, "test2_%s_%s_view.png" % (name, r.name))).message
+               for r in self.fleet.robots]
+        out.append(self.fleet.world_snapshot(os.path.join(folder, "test2_%s_world.png" % name)).message)
+        return "; ".join(out)
+
+    def reach(self, robot, goal):
+        finished, state, text = robot.go(goal, 300.0)
+        self.assertTrue(finished and state == "SUCCEEDED", "%s did not reach %s: %s %s; %s"
+                        % (robot.name, goal, state, text, self.pictures(robot.name + "_" + goal)))
+
+    def test_clear_and_share_update(self):
+        fleet = self.fleet
+        r0, r1 = fleet.robots
+        right = fleet.corridor("right")
+        block_y = fleet.facility["blocks"]["block_right"]["pose"][1]
+        fleet.remove_block("block_middle")
+
+        self.reach(r0, "orange")
+        self.assertEqual(1, len(r0.stuck), "robot_0 stuck %s, expected once at block_right" % r0.stuck)
+        shares = r0.shares()
+        self.assertEqual(1, len(shares), "robot_0 shared %d obstacles, expected block_right only" % len(shares))
+        uuid = shares[0][1].uuid
+        self.reach(r0, "purple")
+        fleet.wait_until(lambda: uuid in r1.obstacles(), 20.0, "robot_1 to hold %s" % uuid)
+        before = set(r1.obstacles()[uuid][0])
+        self.assertTrue(before, "robot_1 holds %s without cells" % uuid)
+
+        removed_at = rospy.get_time()
+        fleet.remove_block("block_right")
+
+        def cleared_update():
+            with fleet.lock:
+                return [m for t, m in r0.to_fleet if t >= removed_at and m.uuid == uuid and m.cleared_indexes]
+        updates = fleet.wait_until(cleared_update, 30.0, "robot_0's update of %s with cleared cells" % uuid)
+        self.assertEqual("robot_0", updates[0].source)
+        self.assertGreater(updates[0].version, 1)
+        self.assertTrue(set(updates[0].cleared_indexes) & before, "the update clears none of the shared cells")
+
+        def equal_cells():
+            a, b = r0.obstacles().get(uuid), r1.obstacles().get(uuid)
+            return a is not None and b is not None and a[0] == b[0] and a
+        cells = fleet.wait_until(equal_cells, 30.0, "both robots' cells of %s to be equal" % uuid)[0]
+        self.assertLess(len(cells), len(before), "the update cleared nothing on robot_1")
+
+        # robot_0 makes way at the top of the corridor; robot_1 drives straight through it.
+        self.reach(r0, "orange")
+        sent = r1.send("purple")
+        finished, state, text = r1.wait(300.0)
+        self.assertTrue(finished and state == "SUCCEEDED", "robot_1 did not reach purple: %s %s; %s"
+                        % (state, text, self.pictures("robot_1")))
+        self.assertEqual([], r1.stuck, "robot_1 got stuck in the cleared corridor")
+        plans = [p for t, p in r1.plans if t >= sent]
+        self.assertTrue(plans, "robot_1 published no plan")
+        crossing = [p for p in entered(plans[0], right) if abs(p[1] - block_y) < 0.2]
+        self.assertTrue(crossing, "robot_1's first plan does not run through the cleared corridor")
+        driven = [p for p in entered([p for p in r1.track if p[0] >= sent], right) if abs(p[2] - block_y) < 0.3]
+        self.assertTrue(driven, "robot_1 did not drive through the cleared corridor")
+        self.assertFalse(entered([p for p in r1.track if p[0] >= sent], fleet.corridor("middle")),
+                         "robot_1 took the middle corridor")
+
+        same, lists = fleet.lists_identical()
+        self.assertTrue(same, "obstacle lists differ: %s" % lists)
+        self.assertIn(uuid, lists[0])
+
+
+if __name__ == "__main__":
+    rostest.rosrun("fleet_tests", "test2_clear", Test2Clear)
