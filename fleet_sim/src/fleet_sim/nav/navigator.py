@@ -75,7 +75,6 @@ class Navigator:
         self.failures = 0
         self.next_plan = None
         self.best_remaining = None   # shortest remaining plan length so far (progress check)
-        self.last_route_change = -math.inf
         self.last_progress_time = None
         self.stuck_count = 0         # stuck reports for the current goal
         self.final_rotation = False
@@ -102,7 +101,6 @@ class Navigator:
         self.stall_ref = None
         self.next_plan = now
         self.best_remaining = None
-        self.last_route_change = -math.inf
         self.last_progress_time = now
         self.final_rotation = False
 
@@ -344,8 +342,6 @@ class Navigator:
         # No progress for stuck_timeout seconds: the plan's remaining length did not shrink (pushing
         # against something unseen, or going back and forth in front of a gap the footprint does
         # not pass). The plan ahead is then remembered as blocked, so the replan takes another way.
-        # A replan onto a longer route (a shared obstacle arrived) starts the count again, but at most
-        # once per stuck_timeout: plans that flip between two routes are no progress.
         remaining = self._remaining()
         if self.best_remaining is None or remaining < self.best_remaining - 0.1:
             self.best_remaining = remaining
@@ -360,9 +356,11 @@ class Navigator:
             self.path_xy = np.zeros((0, 2))
             self.next_plan = now
             return self._fail(step, reason, now)
-        elif remaining > self.best_remaining + 1.0 and now - self.last_route_change > self.params.stuck_timeout:
+        elif remaining > self.best_remaining + 1.0 and now - self.last_progress_time < self.params.stuck_timeout / 4:
+            # A replan onto a longer route while the robot was making progress (a shared obstacle
+            # arrived) starts the count again; after a while without progress it is no excuse.
             self.best_remaining = remaining
-            self.last_route_change = self.last_progress_time = now
+            self.last_progress_time = now
 
         step.linear, step.angular = self._escape(now, pose) or self._follow(pose)
         self._watch_motion(now, pose, step.linear, step.angular)
