@@ -9,11 +9,13 @@ MQTT alone (fleet.launch), the test node never forwards anything.
 import math
 import os
 import threading
+import time
 
 import actionlib
 import rospy
 import yaml
 from actionlib_msgs.msg import GoalStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from std_msgs.msg import Empty, String
@@ -71,6 +73,9 @@ class Robot:
         self.plans = []          # (sim time, [(x, y)])
         self.track = []          # (sim time, x, y) of the true pose, at most every 0.2 s
         self.costmap = None
+        self.proposals_wall = []  # (wall time, SharedObstacle) this robot's layer proposed
+        self.layer_in_wall = []   # (wall time, SharedObstacle) the handler gave this robot's layer
+        self.bridge_stats = {}    # latest coaty_bridge /diagnostics values
         self.pose = None
         self.distance = 0.0
         rospy.Subscriber(ns + "stuck_feedback", Empty, self._on_stuck, queue_size=10)
@@ -80,6 +85,8 @@ class Robot:
         rospy.Subscriber(ns + "plan", Path, self._on_plan, queue_size=10)
         rospy.Subscriber(ns + "base_pose_ground_truth", Odometry, self._on_pose, queue_size=10)
         rospy.Subscriber(ns + "global_costmap/costmap", OccupancyGrid, self._on_costmap, queue_size=1)
+        rospy.Subscriber(ns + "obstacle_proposals", SharedObstacle, self._wall(self.proposals_wall), queue_size=100)
+        rospy.Subscriber(ns + "shared_obstacles", SharedObstacle, self._wall(self.layer_in_wall), queue_size=1000)
         self.client = actionlib.SimpleActionClient(ns + "move_base", MoveBaseAction)
         self.list_srv = rospy.ServiceProxy(ns + "list_obstacles", ListObstacles)
         self.snapshot_srv = rospy.ServiceProxy(ns + "move_base/snapshot", Snapshot)
@@ -88,6 +95,12 @@ class Robot:
         def cb(msg):
             with self.lock:
                 target.append((rospy.get_time(), msg))
+        return cb
+
+    def _wall(self, target):
+        def cb(msg):
+            with self.lock:
+                target.append((time.time(), msg))
         return cb
 
     def _on_stuck(self, _msg):
@@ -168,6 +181,40 @@ class Fleet:
         self._move = rospy.ServiceProxy("/fleet_sim/move_block", MoveBlock)
         self._remove = rospy.ServiceProxy("/fleet_sim/remove_block", RemoveBlock)
         self._snapshot = rospy.ServiceProxy("/fleet_sim/snapshot", Snapshot)
+        rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=100)
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name.startswith("coaty_bridge: "):
+                name = status.name.split(": ", 1)[1]
+                for r in self.robots:
+                    if r.name == name:
+                        with self.lock:
+                            r.bridge_stats = {kv.key: kv.value for kv in status.values}
+
+    def latencies(self):
+        """Wall seconds from a robot's proposal to each peer's layer receiving the authorised obstacle
+        (detection -> peer costmap), one value per (obstacle, peer)."""
+        out = []
+        with self.lock:
+            for r in self.robots:
+                for _ts, share in [(t, m) for t, m in r.to_fleet if m.version == 1 and m.source == r.name]:
+                    proposed = [t for t, p in r.proposals_wall if t <= self._wall_of(r, share)]
+                    if not proposed:
+                        continue
+                    t0 = proposed[-1]
+                    for peer in self.robots:
+                        if peer is r:
+                            continue
+                        got = [t for t, m in peer.layer_in_wall if m.uuid == share.uuid]
+                        if got:
+                            out.append(got[0] - t0)
+        return out
+
+    def _wall_of(self, robot, share):
+        """Wall time at which robot's own layer got its authorised obstacle back."""
+        times = [t for t, m in robot.layer_in_wall if m.uuid == share.uuid]
+        return times[0] if times else float("inf")
 
     def goal(self, name):
         try:
