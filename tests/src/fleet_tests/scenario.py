@@ -42,12 +42,13 @@ def load_facility(path=None):
         goals = {k: tuple(float(v) for v in val) for k, val in data["goals"].items()}
         corridors = {k: tuple(float(v) for v in val) for k, val in data["corridors"].items()}
         blocks = data["blocks"]
+        bench_goals = [tuple(float(v) for v in g) for g in data.get("bench_goals", [])]
     except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
         raise ScenarioError("cannot read the facility description %s: %s" % (path, err)) from None
     for name, g in goals.items():
         if len(g) != 3 or not all(math.isfinite(v) for v in g):
             raise ScenarioError("%s: goal %s must be [x, y, yaw], got %r" % (path, name, g))
-    return {"goals": goals, "corridors": corridors, "blocks": blocks, "path": path}
+    return {"goals": goals, "corridors": corridors, "blocks": blocks, "bench_goals": bench_goals, "path": path}
 
 
 def inside(rect, x, y, margin=0.0):
@@ -136,7 +137,7 @@ class Robot:
             raise ScenarioError("%s/move_base action server not up after %.0f s" % (self.name, timeout))
 
     def send(self, goal_name):
-        x, y, yaw = self.fleet.goal(goal_name)
+        x, y, yaw = goal_name if isinstance(goal_name, tuple) else self.fleet.goal(goal_name)
         goal = MoveBaseGoal()
         goal.target_pose.header.frame_id = "map"
         goal.target_pose.header.stamp = rospy.Time.now()
@@ -193,28 +194,24 @@ class Fleet:
                             r.bridge_stats = {kv.key: kv.value for kv in status.values}
 
     def latencies(self):
-        """Wall seconds from a robot's proposal to each peer's layer receiving the authorised obstacle
-        (detection -> peer costmap), one value per (obstacle, peer)."""
+        """Wall seconds from a robot's layer proposing an obstacle (detection) to each peer's layer
+        receiving it authorised (peer costmap), one value per (obstacle, peer). The proposal is the
+        one with the obstacle's rectangle (authorisation keeps it)."""
         out = []
         with self.lock:
             for r in self.robots:
                 for _ts, share in [(t, m) for t, m in r.to_fleet if m.version == 1 and m.source == r.name]:
-                    proposed = [t for t, p in r.proposals_wall if t <= self._wall_of(r, share)]
-                    if not proposed:
-                        continue
-                    t0 = proposed[-1]
+                    rect = tuple(share.rectangle_shape)
                     for peer in self.robots:
                         if peer is r:
                             continue
                         got = [t for t, m in peer.layer_in_wall if m.uuid == share.uuid]
-                        if got:
-                            out.append(got[0] - t0)
+                        if not got:
+                            continue
+                        proposed = [t for t, p in r.proposals_wall if tuple(p.rectangle_shape) == rect and t <= got[0]]
+                        if proposed:
+                            out.append(got[0] - proposed[-1])
         return out
-
-    def _wall_of(self, robot, share):
-        """Wall time at which robot's own layer got its authorised obstacle back."""
-        times = [t for t, m in robot.layer_in_wall if m.uuid == share.uuid]
-        return times[0] if times else float("inf")
 
     def goal(self, name):
         try:
