@@ -11,7 +11,7 @@ import sys
 
 import rospy
 
-from fleet_tests.scenario import Fleet, ScenarioError, percentile
+from fleet_tests.scenario import Fleet, ScenarioError, percentile, wait_for_sim_time
 
 
 def near_block(track, block, reach):
@@ -34,6 +34,7 @@ def main(argv=None):
     parser.add_argument("--goal-timeout", type=float, default=400.0, help="simulated s per robot")
     parser.add_argument("--out", required=True)
     args = parser.parse_args(rospy.myargv(argv or sys.argv)[1:])
+    wait_for_sim_time()
     rospy.init_node("bench_fleet_run")
     fleet = Fleet(args.robots)
     goals = fleet.facility["bench_goals"]

@@ -11,7 +11,7 @@ import sys
 import rospy
 from PIL import Image, ImageDraw
 
-from fleet_tests.scenario import Fleet, ScenarioError, percentile
+from fleet_tests.scenario import Fleet, ScenarioError, percentile, wait_for_sim_time
 
 TILT = 0.2
 
@@ -146,6 +146,7 @@ def main(argv=None):
     parser.add_argument("--out", required=True)
     args = parser.parse_args(rospy.myargv(argv or sys.argv)[1:])
     os.makedirs(args.out, exist_ok=True)
+    wait_for_sim_time()
     rospy.init_node("demo_test%d" % args.test)
     try:
         Demo(args.test, os.path.abspath(args.out)).run()

@@ -31,6 +31,22 @@ class ScenarioError(Exception):
     """A scenario step could not be carried out (bad goal name, service refused, ...)."""
 
 
+def wait_for_sim_time(timeout=60.0):
+    """Before rospy.init_node in a process started next to roslaunch: waits until the master is up
+    and /use_sim_time is set, so that the node runs on the simulator's /clock (rospy reads the
+    parameter once, at init)."""
+    import rosgraph
+    end = time.time() + timeout
+    while time.time() < end:
+        try:
+            if rosgraph.Master("/fleet_scenario").getParam("/use_sim_time"):
+                return
+        except Exception:  # master not up yet, or parameter not set yet
+            pass
+        time.sleep(0.2)
+    raise ScenarioError("no ROS master with /use_sim_time true after %.0f s" % timeout)
+
+
 def load_facility(path=None):
     """goals.yaml of fleet_launch: goals, corridors and blocks; a bad file raises ScenarioError."""
     if path is None:
@@ -232,11 +248,9 @@ class Fleet:
             r.wait_ready(timeout)
         for s in ("/fleet_sim/add_block", "/fleet_sim/remove_block", "/fleet_sim/snapshot"):
             rospy.wait_for_service(s, timeout)
-        for r in self.robots:
-            try:
+        if rospy.get_param("/robot_0/move_base/sharing_enabled", True):
+            for r in self.robots:
                 rospy.wait_for_service(r.list_srv.resolved_name, timeout)
-            except rospy.ROSException:
-                pass  # sharing off: no handler
 
     def remove_block(self, name):
         resp = self._remove(name)
