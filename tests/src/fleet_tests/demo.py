@@ -130,7 +130,8 @@ class Demo:
             "robots": {r.name: {"stuck": len(r.stuck), "shared": len(r.shares()),
                                 "updates_sent": sum(1 for _t, m in r.to_fleet if m.version > 1),
                                 "received": len(r.from_fleet), "distance_m": round(r.distance, 1),
-                                "bytes_published": r.bridge_stats.get("bytes_published", "?")}
+                                "bytes_published": (r.bridge_stats.get("bytes_published", "0") if r.bridge_stats
+                                                    else "?")}
                        for r in f.robots},
             "latency_ms_p50": percentile(lat, 50), "latency_ms_p99": percentile(lat, 99),
             "lists_identical": same, "obstacles_at_end": len(lists[0]),
