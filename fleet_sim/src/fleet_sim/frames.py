@@ -5,6 +5,11 @@ A transform ``T_a_b`` maps coordinates in frame b into frame a.
 import math
 
 
+def yaw_quaternion(yaw):
+    """The quaternion (x, y, z, w) of a rotation by yaw about z."""
+    return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+
+
 def normalize_angle(a):
     """Angle wrapped into [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi

@@ -36,6 +36,7 @@ from tf2_msgs.msg import TFMessage
 
 from fleet_sim import frames
 from fleet_sim.errors import InvalidRequestError, SimError, WorldError
+from fleet_sim.frames import yaw_quaternion
 from fleet_sim.map_io import load_map_image, load_map_yaml
 from fleet_sim.sim import LocalisationError, Simulation
 from fleet_sim.snapshot import save_png
@@ -71,17 +72,13 @@ def _number_param(name, default, minimum):
     return number
 
 
-def _quat(yaw):
-    return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
-
-
 def _tf(stamp, parent, child, t):
     msg = TransformStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = parent
     msg.child_frame_id = child
     msg.transform.translation.x, msg.transform.translation.y = t[0], t[1]
-    q = _quat(t[2])
+    q = yaw_quaternion(t[2])
     (msg.transform.rotation.x, msg.transform.rotation.y,
      msg.transform.rotation.z, msg.transform.rotation.w) = q
     return msg
@@ -292,7 +289,7 @@ def build_messages(sim, names, stamp, with_scans):
         odom.child_frame_id = ns + "base_link"
         p = odom.pose.pose
         p.position.x, p.position.y = r.pose[0], r.pose[1]
-        (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) = _quat(r.pose[2])
+        (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) = yaw_quaternion(r.pose[2])
         odom.twist.twist.linear.x, odom.twist.twist.linear.y = r.velocity[0], r.velocity[1]
         odom.twist.twist.angular.z = r.velocity[2]
         out.odoms.append(odom)

@@ -10,11 +10,12 @@ import rospy
 import rostest
 import tf2_ros
 from actionlib_msgs.msg import GoalStatus
-from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from move_base_msgs.msg import MoveBaseAction
 from nav_msgs.msg import Path
 from std_msgs.msg import Empty
 
 from fleet_sim.srv import AddBlock, Snapshot
+from fleet_sim.nav.goals import move_base_goal
 
 
 class NavWillow(unittest.TestCase):
@@ -38,13 +39,7 @@ class NavWillow(unittest.TestCase):
         return t.transform.translation.x, t.transform.translation.y
 
     def go(self, x, y, yaw, timeout):
-        goal = MoveBaseGoal()
-        goal.target_pose.header.frame_id = "map"
-        goal.target_pose.header.stamp = rospy.Time.now()
-        goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
-        goal.target_pose.pose.orientation.z = math.sin(yaw / 2.0)
-        goal.target_pose.pose.orientation.w = math.cos(yaw / 2.0)
-        self.client.send_goal(goal)
+        self.client.send_goal(move_base_goal(x, y, yaw))
         finished = self.client.wait_for_result(rospy.Duration(timeout))
         state, text = self.client.get_state(), self.client.get_goal_status_text()
         if not finished or state != GoalStatus.SUCCEEDED:

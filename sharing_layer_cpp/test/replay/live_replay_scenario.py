@@ -3,7 +3,6 @@
 compare with what the live sharing_handler holds."""
 import io
 import json
-import math
 import os
 import shutil
 import signal
@@ -15,11 +14,12 @@ import unittest
 import actionlib
 import rospy
 import rostest
-from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from move_base_msgs.msg import MoveBaseAction
 from sharing_msgs.msg import SharedObstacleArray
 from sharing_msgs.srv import ListObstacles
 
 from sharing_layer_cpp.replay import cli
+from fleet_sim.nav.goals import move_base_goal
 
 # A replayed obstacle matches a live one when their cell sets differ by at most this share
 # of the larger set (the live layer and the replay see the same scans; the live handler's
@@ -78,13 +78,7 @@ class LiveReplay(unittest.TestCase):
 
     def test_replay_shares_what_the_live_run_shared(self):
         gx, gy, gyaw = rospy.get_param("~goal")
-        goal = MoveBaseGoal()
-        goal.target_pose.header.frame_id = "map"
-        goal.target_pose.header.stamp = rospy.Time.now()
-        goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = gx, gy
-        goal.target_pose.pose.orientation.z = math.sin(gyaw / 2)
-        goal.target_pose.pose.orientation.w = math.cos(gyaw / 2)
-        self.client.send_goal(goal)
+        self.client.send_goal(move_base_goal(gx, gy, gyaw))
         # Wait for the share, then a few simulated seconds of monitoring while the robot turns away.
         give_up = time.monotonic() + 100.0
         while not (self.lists and self.lists[-1].obstacles) and time.monotonic() < give_up:

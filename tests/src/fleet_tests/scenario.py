@@ -16,11 +16,12 @@ import rospy
 import yaml
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
-from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from move_base_msgs.msg import MoveBaseAction
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from std_msgs.msg import Empty, String
 
 from fleet_sim.srv import AddBlock, MoveBlock, RemoveBlock, Snapshot
+from fleet_sim.nav.goals import move_base_goal
 from sharing_msgs.msg import SharedObstacle
 from sharing_msgs.srv import ListObstacles
 
@@ -154,12 +155,7 @@ class Robot:
 
     def send(self, goal_name):
         x, y, yaw = goal_name if isinstance(goal_name, tuple) else self.fleet.goal(goal_name)
-        goal = MoveBaseGoal()
-        goal.target_pose.header.frame_id = "map"
-        goal.target_pose.header.stamp = rospy.Time.now()
-        goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
-        goal.target_pose.pose.orientation.z = math.sin(yaw / 2.0)
-        goal.target_pose.pose.orientation.w = math.cos(yaw / 2.0)
+        goal = move_base_goal(x, y, yaw)
         rospy.loginfo("scenario: %s sent to %s (%.2f, %.2f)", self.name, goal_name, x, y)
         self.client.send_goal(goal)
         return rospy.get_time()

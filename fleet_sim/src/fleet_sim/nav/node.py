@@ -26,6 +26,7 @@ from std_msgs.msg import Empty, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from sharing_layer_cpp import core
+from fleet_sim.frames import yaw_quaternion
 from fleet_sim.nav.costmap import GlobalCostmap
 from fleet_sim.nav.errors import GoalRejected, ParameterError
 from fleet_sim.nav.navigator import Event, Navigator
@@ -403,8 +404,8 @@ class NavNode:
                 fb.base_position.header.frame_id = p.global_frame
                 fb.base_position.header.stamp = rospy.Time.now()
                 fb.base_position.pose.position.x, fb.base_position.pose.position.y = x, y
-                fb.base_position.pose.orientation.z = math.sin(yaw / 2.0)
-                fb.base_position.pose.orientation.w = math.cos(yaw / 2.0)
+                o = fb.base_position.pose.orientation
+                o.x, o.y, o.z, o.w = yaw_quaternion(yaw)
                 self.server.publish_feedback(fb)
             rate.sleep()
 

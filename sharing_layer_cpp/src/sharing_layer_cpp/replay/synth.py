@@ -15,6 +15,7 @@ from typing import List, Sequence, Tuple
 import numpy as np
 
 from sharing_layer_cpp import core
+from fleet_sim.frames import yaw_quaternion
 
 
 @dataclass
@@ -99,10 +100,6 @@ def _pose_along(path, speed, t, start_delay=0.0):
     return x1, y1, math.atan2(y1 - y0, x1 - x0)
 
 
-def _quat(yaw):
-    return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
-
-
 def _transform(stamp, parent, child, x, y, yaw, z=0.0):
     from geometry_msgs.msg import TransformStamped
     t = TransformStamped()
@@ -110,7 +107,7 @@ def _transform(stamp, parent, child, x, y, yaw, z=0.0):
     t.header.frame_id = parent
     t.child_frame_id = child
     t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = x, y, z
-    q = _quat(yaw)
+    q = yaw_quaternion(yaw)
     t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w = q
     return t
 
