@@ -8,30 +8,16 @@ stuck event, no plan or pose of it inside a blocked corridor. robot_1, which rob
 start, is never shared. At the end both robots hold the same obstacle list.
 """
 import math
-import os
-import tempfile
-import unittest
 
-import rospy
 import rostest
 
-from fleet_tests.scenario import Fleet, cell_centre, entered, inside
+from fleet_tests.scenario import cell_centre, entered, inside
+from fleet_tests.testcase import FleetTestCase
 
 
-class Test1Share(unittest.TestCase):
-    @classmethod
-    def setUpClass(cls):
-        rospy.init_node("test1_share")
-        cls.fleet = Fleet(2)
-        cls.fleet.wait_ready(120.0)
-
-    def pictures(self, name):
-        folder = os.environ.get("ROS_TEST_RESULTS_DIR") or tempfile.gettempdir()
-        out = []
-        for r in self.fleet.robots:
-            out.append(r.snapshot(os.path.join(folder, "test1_%s_%s_view.png" % (name, r.name))).message)
-        out.append(self.fleet.world_snapshot(os.path.join(folder, "test1_%s_world.png" % name)).message)
-        return "; ".join(out)
+class Test1Share(FleetTestCase):
+    NODE = "test1_share"
+    PICTURE_PREFIX = "test1"
 
     def test_share_and_react(self):
         fleet = self.fleet
@@ -40,9 +26,7 @@ class Test1Share(unittest.TestCase):
         blocked = {name: fleet.corridor(b["corridor"]) for name, b in blocks.items()}
         r1_start = r1.pose
 
-        finished, state, text = r0.go("orange", 300.0)
-        self.assertTrue(finished and state == "SUCCEEDED",
-                        "robot_0 did not reach orange: %s %s; %s" % (state, text, self.pictures("robot_0")))
+        self.assert_succeeded(r0, "orange", r0.go("orange", 300.0))
 
         # Stuck once at each block, each block shared once (and nothing else shared).
         self.assertEqual(len(blocks), len(r0.stuck), "robot_0 stuck events %s, expected one per block" % r0.stuck)
@@ -74,9 +58,7 @@ class Test1Share(unittest.TestCase):
         # robot_1 has both obstacles (through MQTT) before it is sent.
         fleet.wait_until(lambda: len(r1.obstacles()) == len(blocks), 20.0, "robot_1 to hold both obstacles")
         sent = r1.send("purple")
-        finished, state, text = r1.wait(300.0)
-        self.assertTrue(finished and state == "SUCCEEDED",
-                        "robot_1 did not reach purple: %s %s; %s" % (state, text, self.pictures("robot_1")))
+        self.assert_succeeded(r1, "purple", r1.wait(300.0))
         self.assertEqual([], r1.stuck, "robot_1 got stuck")
         plans = [p for t, p in r1.plans if t >= sent]
         self.assertTrue(plans, "robot_1 published no plan")

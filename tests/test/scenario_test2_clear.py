@@ -8,34 +8,17 @@ obstacle with the cleared cells, and both robots then hold the same cells for it
 purple, plans and drives straight up the right corridor with no stuck event. Both robots' obstacle
 lists are identical at the end.
 """
-import os
-import tempfile
-import unittest
 
 import rospy
 import rostest
 
-from fleet_tests.scenario import Fleet, entered
+from fleet_tests.scenario import entered
+from fleet_tests.testcase import FleetTestCase
 
 
-class Test2Clear(unittest.TestCase):
-    @classmethod
-    def setUpClass(cls):
-        rospy.init_node("test2_clear")
-        cls.fleet = Fleet(2)
-        cls.fleet.wait_ready(120.0)
-
-    def pictures(self, name):
-        folder = os.environ.get("ROS_TEST_RESULTS_DIR") or tempfile.gettempdir()
-        out = [r.snapshot(os.path.join(folder, "test2_%s_%s_view.png" % (name, r.name))).message
-               for r in self.fleet.robots]
-        out.append(self.fleet.world_snapshot(os.path.join(folder, "test2_%s_world.png" % name)).message)
-        return "; ".join(out)
-
-    def reach(self, robot, goal):
-        finished, state, text = robot.go(goal, 300.0)
-        self.assertTrue(finished and state == "SUCCEEDED", "%s did not reach %s: %s %s; %s"
-                        % (robot.name, goal, state, text, self.pictures(robot.name + "_" + goal)))
+class Test2Clear(FleetTestCase):
+    NODE = "test2_clear"
+    PICTURE_PREFIX = "test2"
 
     def test_clear_and_share_update(self):
         fleet = self.fleet
@@ -74,9 +57,7 @@ class Test2Clear(unittest.TestCase):
         # robot_0 makes way at the top of the corridor; robot_1 drives straight through it.
         self.reach(r0, "orange")
         sent = r1.send("purple")
-        finished, state, text = r1.wait(300.0)
-        self.assertTrue(finished and state == "SUCCEEDED", "robot_1 did not reach purple: %s %s; %s"
-                        % (state, text, self.pictures("robot_1")))
+        self.assert_succeeded(r1, "purple", r1.wait(300.0))
         self.assertEqual([], r1.stuck, "robot_1 got stuck in the cleared corridor")
         plans = [p for t, p in r1.plans if t >= sent]
         self.assertTrue(plans, "robot_1 published no plan")

@@ -10,36 +10,20 @@ robots hold the same cells. robot_1 drives back to its start; after the deadline
 gone from both lists and both costmaps, and neither robot sent or received a message for it.
 """
 import math
-import os
-import tempfile
-import unittest
 
 import rospy
 import rostest
 
-from fleet_tests.scenario import Fleet, cell_centre, inside
+from fleet_tests.scenario import cell_centre, inside
+from fleet_tests.testcase import FleetTestCase
 
 TILT = 0.2  # rad
 
 
-class Test3Expiry(unittest.TestCase):
-    @classmethod
-    def setUpClass(cls):
-        rospy.init_node("test3_expiry")
-        cls.fleet = Fleet(2)
-        cls.fleet.wait_ready(120.0)
-
-    def pictures(self, name):
-        folder = os.environ.get("ROS_TEST_RESULTS_DIR") or tempfile.gettempdir()
-        out = [r.snapshot(os.path.join(folder, "test3_%s_%s_view.png" % (name, r.name))).message
-               for r in self.fleet.robots]
-        out.append(self.fleet.world_snapshot(os.path.join(folder, "test3_%s_world.png" % name)).message)
-        return "; ".join(out)
-
-    def reach(self, robot, goal):
-        finished, state, text = robot.go(goal, 200.0)
-        self.assertTrue(finished and state == "SUCCEEDED", "%s did not reach %s: %s %s; %s"
-                        % (robot.name, goal, state, text, self.pictures(robot.name + "_" + goal)))
+class Test3Expiry(FleetTestCase):
+    NODE = "test3_expiry"
+    PICTURE_PREFIX = "test3"
+    GOAL_TIMEOUT = 200.0
 
     @staticmethod
     def costs(robot, msg):
