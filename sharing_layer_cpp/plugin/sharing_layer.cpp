@@ -221,7 +221,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     {
       if (pre_static_scans_.size() == kMaxPreStaticScans)
       {
-        pre_static_scans_.erase(pre_static_scans_.begin());
+        pre_static_scans_.pop_front();
       }
       pre_static_scans_.push_back(std::move(scan));
     }

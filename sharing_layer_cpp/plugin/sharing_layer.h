@@ -1,6 +1,7 @@
 #ifndef SHARING_LAYER_PLUGIN_SHARING_LAYER_H
 #define SHARING_LAYER_PLUGIN_SHARING_LAYER_H
 
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -54,7 +55,7 @@ private:
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
   /// Scans processed while static_pending_: their cells were judged shareable without the static map
   /// (walls too), so they are replayed once it is read. At most kMaxPreStaticScans, the newest.
-  std::vector<Observation> pre_static_scans_;
+  std::deque<Observation> pre_static_scans_;
   static constexpr std::size_t kMaxPreStaticScans = 100;
   ros::Time stuck_stamp_;
   std::string global_frame_;
