@@ -1,4 +1,4 @@
 from setuptools import setup
 from catkin_pkg.python_setup import generate_distutils_setup
 
-setup(**generate_distutils_setup(packages=["sharing_layer_cpp", "sharing_layer_cpp.replay"], package_dir={"": "src"}))
+setup(**generate_distutils_setup(packages=["sharing_layer_cpp"], package_dir={"": "src"}))

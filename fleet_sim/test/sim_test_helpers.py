@@ -15,8 +15,6 @@ DATA = os.path.join(HERE, "data")
 # The project's reference data: $FLEET_SHARED_DATA, else ../shared/data next to the repo.
 SHARED = os.environ.get("FLEET_SHARED_DATA") or os.path.join(
     os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))), "shared", "data")
-if not os.path.isdir(SHARED):
-    SHARED = "/work/shared/data"
 WILLOW = os.path.join(SHARED, "stage_worlds", "willow", "willow-pr2-multi.world")
 SIMPLE = os.path.join(SHARED, "stage_worlds", "stage_examples", "simple.world")
 WILLOW_PGM = os.path.join(SHARED, "stage_worlds", "maps", "willow-full.pgm")

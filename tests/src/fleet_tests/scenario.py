@@ -21,7 +21,7 @@ from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from std_msgs.msg import Empty, String
 
 from fleet_sim.srv import AddBlock, MoveBlock, RemoveBlock, Snapshot
-from fleet_sim.nav.goals import move_base_goal
+from fleet_nav.goals import move_base_goal
 from sharing_msgs.msg import SharedObstacle
 from sharing_msgs.srv import ListObstacles
 

@@ -1,0 +1,268 @@
+"""The parameters fleet_nav shares with move_base and costmap_2d, read from the usual YAML layout.
+
+The navigation tutorials load ``costmap_common_params.yaml`` into ``global_costmap`` and
+``local_costmap``, ``global_costmap_params.yaml`` / ``local_costmap_params.yaml`` and the local
+planner's file at the node's top level. ``NavParams.from_dict`` takes the node's private
+parameter tree and returns validated values plus the keys it did not use (logged once).
+
+Lookup order for a costmap key K: ``global_costmap/K``, ``global_costmap/inflation_layer/K``
+(inflation keys only), then ``K``. Local-planner keys come from ``TrajectoryPlannerROS/``, then
+``DWAPlannerROS/``, then the top level. Layer parameters of the sharing layer come from
+``sharing/`` or ``sharing_layer/`` (static_tolerance, proposal_strategy, trigger_debounce,
+cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost).
+"""
+import ast
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, Tuple
+
+from fleet_nav.errors import ParameterError
+
+SHARING_KEYS = ("static_tolerance", "proposal_strategy", "trigger_debounce", "cluster_gap",
+                "min_cluster_cells", "rectangle_padding", "max_update_cells", "static_occupied_cost")
+
+
+def _flatten(tree, prefix=""):
+    out = {}
+    for key, value in (tree or {}).items():
+        name = prefix + str(key)
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "/"))
+        else:
+            out[name] = value
+    return out
+
+
+def _number(name, value, low=None, high=None, low_open=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError("parameter %s must be a number, got %r" % (name, value))
+    value = float(value)
+    if not math.isfinite(value):
+        raise ParameterError("parameter %s must be finite, got %r" % (name, value))
+    if low is not None and (value <= low if low_open else value < low):
+        raise ParameterError("parameter %s must be %s %s, got %r" % (name, ">" if low_open else ">=", low, value))
+    if high is not None and value > high:
+        raise ParameterError("parameter %s must be <= %s, got %r" % (name, high, value))
+    return value
+
+
+def parse_footprint(name, value):
+    """costmap_2d accepts a list of [x, y] points or the same written as a string."""
+    if isinstance(value, str):
+        try:
+            value = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError):
+            raise ParameterError("parameter %s must be [[x, y], ...], got %r" % (name, value)) from None
+    if not isinstance(value, (list, tuple)) or len(value) < 3:
+        raise ParameterError("parameter %s needs at least 3 points, got %r" % (name, value))
+    points = []
+    for p in value:
+        if not isinstance(p, (list, tuple)) or len(p) != 2:
+            raise ParameterError("parameter %s: point %r is not [x, y]" % (name, p))
+        points.append((_number(name, p[0]), _number(name, p[1])))
+    return tuple(points)
+
+
+def pad_footprint(points, padding):
+    """costmap_2d's padFootprint: every coordinate moved away from zero by padding."""
+    return tuple((x + math.copysign(padding, x) if x != 0 else x,
+                  y + math.copysign(padding, y) if y != 0 else y) for x, y in points)
+
+
+def inscribed_radius(points):
+    """Smallest distance from the robot centre to an edge of the footprint polygon."""
+    best = math.inf
+    n = len(points)
+    for i in range(n):
+        (x0, y0), (x1, y1) = points[i], points[(i + 1) % n]
+        dx, dy = x1 - x0, y1 - y0
+        length2 = dx * dx + dy * dy
+        t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(x0 * dx + y0 * dy) / length2))
+        best = min(best, math.hypot(x0 + t * dx, y0 + t * dy))
+    return best
+
+
+@dataclass(frozen=True)
+class NavParams:
+    robot_name: str = "robot"
+    global_frame: str = "map"
+    robot_base_frame: str = "base_link"
+    obstacle_range: float = 2.5
+    raytrace_range: float = 3.0
+    min_obstacle_height: float = 0.0
+    max_obstacle_height: float = 2.0
+    inflation_radius: float = 0.55
+    cost_scaling_factor: float = 10.0
+    footprint: Tuple[Tuple[float, float], ...] = ()
+    robot_radius: float = 0.46
+    update_frequency: float = 5.0
+    planner_frequency: float = 0.5
+    controller_frequency: float = 10.0
+    lethal_cost_threshold: int = 100
+    track_unknown_space: bool = False
+    max_vel_x: float = 0.5
+    max_rotational_vel: float = 1.0
+    xy_goal_tolerance: float = 0.2
+    yaw_goal_tolerance: float = 0.2
+    lookahead: float = 0.6
+    local_window: float = 6.0
+    blocked_lookahead: float = 2.0
+    clearance_margin: float = 0.1
+    collision_horizon: float = 0.5
+    escape_vel: float = -0.1
+    stall_time: float = 1.5
+    stuck_timeout: float = 20.0
+    max_failures: int = 5
+    sharing_enabled: bool = True
+    sharing: Dict[str, object] = field(default_factory=dict)
+    map_wait_log_period: float = 5.0
+
+    def __post_init__(self):
+        for name in ("obstacle_range", "raytrace_range", "inflation_radius", "cost_scaling_factor",
+                     "robot_radius", "planner_frequency", "xy_goal_tolerance", "yaw_goal_tolerance",
+                     "max_obstacle_height", "clearance_margin"):
+            _number(name, getattr(self, name), low=0.0)
+        for name in ("update_frequency", "controller_frequency", "max_vel_x", "max_rotational_vel",
+                     "lookahead", "local_window", "blocked_lookahead", "stuck_timeout", "map_wait_log_period",
+                     "collision_horizon", "stall_time"):
+            _number(name, getattr(self, name), low=0.0, low_open=True)
+        if self.planner_frequency > 0 and not 0.05 <= self.planner_frequency <= 50:
+            raise ParameterError("parameter planner_frequency must be 0 (plan on new goals only) or "
+                                 "0.05..50 Hz, got %r" % self.planner_frequency)
+        if not isinstance(self.max_failures, int) or isinstance(self.max_failures, bool) or self.max_failures < 1:
+            raise ParameterError("parameter max_failures must be an integer >= 1, got %r" % (self.max_failures,))
+        if not 1 <= self.lethal_cost_threshold <= 100:
+            raise ParameterError("parameter lethal_cost_threshold must be 1..100, got %r"
+                                 % self.lethal_cost_threshold)
+        if self.footprint and len(self.footprint) < 3:
+            raise ParameterError("parameter footprint needs at least 3 points, got %r" % (self.footprint,))
+        if self.local_window < 2 * self.robot_extent:
+            raise ParameterError("parameter local_window (%r m) must be at least the robot's width (%r m)"
+                                 % (self.local_window, 2 * self.robot_extent))
+        if self.local_window / 2.0 <= self.blocked_lookahead:
+            raise ParameterError("parameter local_window (%r m) must be more than twice blocked_lookahead (%r m), "
+                                 "so that a way past a blockage can be searched beyond it"
+                                 % (self.local_window, self.blocked_lookahead))
+
+    @property
+    def inscribed_radius(self):
+        return inscribed_radius(self.footprint) if self.footprint else self.robot_radius
+
+    @property
+    def robot_extent(self):
+        """Circumscribed radius: the farthest footprint point from the centre."""
+        if self.footprint:
+            return max(math.hypot(x, y) for x, y in self.footprint)
+        return self.robot_radius
+
+    @property
+    def footprint_polygon(self):
+        """The footprint, or a 16-gon of robot_radius when only a radius is set."""
+        if self.footprint:
+            return self.footprint
+        return tuple((self.robot_radius * math.cos(a * math.pi / 8), self.robot_radius * math.sin(a * math.pi / 8))
+                     for a in range(16))
+
+    @classmethod
+    def from_dict(cls, tree, robot_name="robot"):
+        """Validated parameters from the node's private parameter tree.
+
+        Returns (params, unused): unused is the sorted list of keys present but not read.
+        """
+        flat = _flatten(tree)
+        used = set()
+
+        def take(keys, default):
+            for key in keys:
+                if key in flat:
+                    used.add(key)
+                    return flat[key], key
+            return default, keys[0]
+
+        def costmap(key, default):
+            keys = ["global_costmap/" + key]
+            if key in ("inflation_radius", "cost_scaling_factor"):
+                keys.append("global_costmap/inflation_layer/" + key)
+            keys.append(key)
+            return take(keys, default)
+
+        def local(key, default, aliases=()):
+            keys = []
+            for name in (key,) + tuple(aliases):
+                keys += ["TrajectoryPlannerROS/" + name, "DWAPlannerROS/" + name]
+            return take(keys + [key], default)
+
+        values = {"robot_name": robot_name}
+
+        def num(target, pair, low=None, integer=False):
+            value, key = pair
+            if integer:
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise ParameterError("parameter %s must be an integer, got %r" % (key, value))
+                values[target] = value
+            else:
+                values[target] = _number(key, value, low=low)
+
+        def flag(target, pair):
+            value, key = pair
+            if not isinstance(value, bool):
+                raise ParameterError("parameter %s must be true or false, got %r" % (key, value))
+            values[target] = value
+
+        def text(target, pair):
+            value, key = pair
+            if not isinstance(value, str) or not value.strip():
+                raise ParameterError("parameter %s must be a frame name, got %r" % (key, value))
+            values[target] = value.strip().lstrip("/")
+
+        # Frames: the private ~ names win over the costmap's (the tutorials' "base_link" gets the
+        # robot's tf prefix, as tf_prefix did for move_base).
+        text("global_frame", take(["global_frame", "global_costmap/global_frame"], "map"))
+        text("robot_base_frame", take(["robot_base_frame", "global_costmap/robot_base_frame"], "base_link"))
+        if "/" not in values["robot_base_frame"] and robot_name and robot_name != "robot":
+            values["robot_base_frame"] = robot_name + "/" + values["robot_base_frame"]
+        num("obstacle_range", costmap("obstacle_range", 2.5))
+        num("raytrace_range", costmap("raytrace_range", 3.0))
+        num("min_obstacle_height", costmap("min_obstacle_height", 0.0))
+        num("max_obstacle_height", costmap("max_obstacle_height", 2.0))
+        num("inflation_radius", costmap("inflation_radius", 0.55))
+        num("cost_scaling_factor", costmap("cost_scaling_factor", 10.0))
+        num("update_frequency", costmap("update_frequency", 5.0))
+        num("lethal_cost_threshold", costmap("lethal_cost_threshold", 100), integer=True)
+        flag("track_unknown_space", costmap("track_unknown_space", False))
+        padding_value, padding_key = costmap("footprint_padding", 0.01)
+        padding = _number(padding_key, padding_value, low=0.0)
+        footprint_value, footprint_key = costmap("footprint", None)
+        radius_value, radius_key = costmap("robot_radius", 0.46)
+        values["robot_radius"] = _number(radius_key, radius_value, low=0.0, low_open=True) + padding
+        if footprint_value is not None:
+            values["footprint"] = pad_footprint(parse_footprint(footprint_key, footprint_value), padding)
+        num("planner_frequency", take(["planner_frequency"], 0.5))
+        num("controller_frequency", take(["controller_frequency"], 10.0))
+        num("max_vel_x", local("max_vel_x", 0.5))
+        num("max_rotational_vel", local("max_rotational_vel", 1.0, aliases=("max_rot_vel",)))
+        num("xy_goal_tolerance", local("xy_goal_tolerance", 0.2))
+        num("escape_vel", local("escape_vel", -0.1))
+        if values["escape_vel"] > 0:
+            raise ParameterError("parameter escape_vel must be <= 0 (a reverse speed), got %r" % values["escape_vel"])
+        num("yaw_goal_tolerance", local("yaw_goal_tolerance", 0.2))
+        for name in ("lookahead", "blocked_lookahead", "clearance_margin", "collision_horizon", "stall_time",
+                     "stuck_timeout", "map_wait_log_period"):
+            num(name, take([name], getattr(cls, name)))
+        # The way past a blockage is searched where move_base's local planner would look: the local
+        # costmap's rolling window (the tutorials' 6 m x 6 m), unless ~local_window says otherwise.
+        width, width_key = take(["local_costmap/width"], None)
+        height, height_key = take(["local_costmap/height"], None)
+        window = [_number(k, v, low=0.0, low_open=True) for v, k in ((width, width_key), (height, height_key))
+                  if v is not None]
+        num("local_window", take(["local_window"], min(window) if window else cls.local_window))
+        num("max_failures", take(["max_failures"], 5), integer=True)
+        flag("sharing_enabled", take(["sharing_enabled"], True))
+        sharing = {}
+        for key in SHARING_KEYS:
+            value, _ = take(["sharing/" + key, "sharing_layer/" + key], None)
+            if value is not None:
+                sharing[key] = value
+        values["sharing"] = sharing
+        unused = sorted(k for k in flat if k not in used)
+        return cls(**values), unused

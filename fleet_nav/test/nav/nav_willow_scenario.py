@@ -1,0 +1,93 @@
+#!/usr/bin/python3
+"""Test node of nav_willow.test: drives robot_0 with the move_base action through fleet_nav."""
+import math
+import os
+import tempfile
+import unittest
+
+import actionlib
+import rospy
+import rostest
+import tf2_ros
+from actionlib_msgs.msg import GoalStatus
+from move_base_msgs.msg import MoveBaseAction
+from nav_msgs.msg import Path
+from std_msgs.msg import Empty
+
+from fleet_sim.srv import AddBlock, Snapshot
+from fleet_nav.goals import move_base_goal
+
+
+class NavWillow(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("nav_willow_scenario")
+        cls.stuck = []
+        cls.plans = []
+        rospy.Subscriber("/robot_0/stuck_feedback", Empty, lambda _m: cls.stuck.append(rospy.get_time()))
+        rospy.Subscriber("/robot_0/plan", Path, lambda m: cls.plans.append(
+            [(p.pose.position.x, p.pose.position.y) for p in m.poses]))
+        cls.tf = tf2_ros.Buffer()
+        cls.listener = tf2_ros.TransformListener(cls.tf)
+        cls.client = actionlib.SimpleActionClient("/robot_0/move_base", MoveBaseAction)
+        assert cls.client.wait_for_server(rospy.Duration(120.0)), "robot_0/move_base action server never came up"
+        rospy.wait_for_service("/fleet_sim/add_block", 60.0)
+        cls.add_block = rospy.ServiceProxy("/fleet_sim/add_block", AddBlock)
+
+    def pose(self):
+        t = self.tf.lookup_transform("map", "robot_0/base_link", rospy.Time(0), rospy.Duration(5.0))
+        return t.transform.translation.x, t.transform.translation.y
+
+    def go(self, x, y, yaw, timeout):
+        self.client.send_goal(move_base_goal(x, y, yaw))
+        finished = self.client.wait_for_result(rospy.Duration(timeout))
+        state, text = self.client.get_state(), self.client.get_goal_status_text()
+        if not finished or state != GoalStatus.SUCCEEDED:
+            text += "; pictures: " + self.pictures("goal_%.0f_%.0f" % (x, y))
+        return finished, state, text
+
+    def pictures(self, name):
+        """fleet_nav's view and the simulated world, for the failure message."""
+        folder = os.environ.get("ROS_TEST_RESULTS_DIR") or tempfile.gettempdir()
+        saved = []
+        for service, path in (("/robot_0/move_base/snapshot", "nav_willow_%s_robot_0_view.png" % name),
+                              ("/fleet_sim/snapshot", "nav_willow_%s_world.png" % name)):
+            try:
+                resp = rospy.ServiceProxy(service, Snapshot)(os.path.join(folder, path), False, 20.0)
+                saved.append(resp.message)
+            except (rospy.ServiceException, rospy.ROSException) as err:
+                saved.append("%s failed: %s" % (service, err))
+        return "; ".join(saved)
+
+    def test_1_far_goal_then_blocked_corridor(self):
+        start = self.pose()
+        gx, gy, gyaw = rospy.get_param("~far_goal")
+        finished, state, text = self.go(gx, gy, gyaw, 200.0)
+        self.assertTrue(finished, "far goal not reached within 200 s of simulated time: %s" % text)
+        self.assertEqual(GoalStatus.SUCCEEDED, state, "far goal: %s" % text)
+        x, y = self.pose()
+        self.assertLess(math.hypot(x - gx, y - gy), 0.3)
+        self.assertEqual([], self.stuck, "stuck_feedback on a free route")
+
+        # Close the corridor the robot came through (map (x, y) = Stage world (y, -x) in Willow).
+        bx, by = rospy.get_param("~block_map_xy")
+        size = rospy.get_param("~block_size")
+        resp = self.add_block("corridor_block", -by, bx, 0.0, size, size)
+        self.assertTrue(resp.success, resp.message)
+        del self.plans[:]
+        finished, state, text = self.go(start[0], start[1], 0.0, 300.0)
+        first = self.plans[0] if self.plans else []
+        self.assertTrue(first and min(math.hypot(px - bx, py - by) for px, py in first) < size,
+                        "scenario: the first plan back (%d poses, from %s to %s) does not run through the "
+                        "corridor at (%.2f, %.2f); %s" % (len(first), first[:1], first[-1:], bx, by, text))
+        self.assertTrue(finished, "return goal not reached within 300 s of simulated time: %s" % text)
+        self.assertEqual(GoalStatus.SUCCEEDED, state, "return goal: %s" % text)
+        self.assertEqual(1, len(self.stuck), "stuck_feedback %d times for one block" % len(self.stuck))
+        # The last plan goes round: it never comes within the block's half size of its centre.
+        last = self.plans[-1]
+        nearest = min(math.hypot(px - bx, py - by) for px, py in last)
+        self.assertGreater(nearest, size / 2.0, "the final plan still runs through the block")
+
+
+if __name__ == "__main__":
+    rostest.rosrun("fleet_nav", "nav_willow", NavWillow)

@@ -1,0 +1,473 @@
+"""The replay proper: one SharingCore + SharingHandler per robot of the bag, driven in bag order.
+
+Per robot the wiring is the live one (fleet_nav's scan callback + the sharing_handler node):
+
+- a scan is transformed to the global frame at its header stamp and given to
+  ``SharingCore.process_scan``; monitoring updates go to ``SharingHandler.on_internal_update``;
+- a trigger (stuck_feedback, move_base/recovery_status or --trigger-at) makes the *next* scan
+  call ``signal_stuck(trigger time)`` and, when that starts a burst, ``propose`` at the robot's
+  base pose; proposals go to ``on_proposal``;
+- what the handler sends to the layer goes to ``apply_shared``, what it sends to the fleet is
+  sized with the Coaty codec (plain and compact) and delivered to every other robot's
+  ``on_external`` (a lossless, zero-latency broker);
+- ``expire`` runs at expiry_rate in bag time. The handlers' clock is the bag time.
+
+Scans wait in a per-robot queue until tf covers their stamp (or ``tf_wait`` seconds of bag
+time have passed), so a transform recorded just after its scan is used, as a live tf listener
+would. Nothing here prints; events go to ``on_event`` and counters to ``problems``.
+"""
+import collections
+import logging
+import random
+import time
+import uuid as uuidlib
+
+import numpy as np
+
+from sharing_layer_cpp import core
+from sharing_replay.config import map_from_message, static_costs
+from sharing_replay.errors import InputError, MissingTopicError, TransformError
+from sharing_replay.tf_chain import TransformChain, yaw_of
+
+LOG = logging.getLogger(__name__)
+
+TRIGGER_TOPICS = {"stuck_feedback": "stuck_feedback", "recovery_status": "move_base/recovery_status"}
+
+
+def _join(ns, name):
+    return "/" + "/".join(p for p in (ns.strip("/"), name.strip("/")) if p)
+
+
+def _frame(ns, name):
+    return "/".join(p for p in (ns.strip("/"), name.strip("/")) if p)
+
+
+def robot_name_of(ns, single_name):
+    """The handler's naming: namespace without slashes, nested a/b -> a_b."""
+    ns = ns.strip("/")
+    return ns.replace("/", "_") if ns else single_name
+
+
+def discover_robots(topics, settings):
+    """{namespace: scan topic} of the LaserScan topics that match settings.scan_topic.
+
+    Raises InputError listing what the bag has when nothing matches (missing topic)."""
+    scans = {t: typ for t, (typ, _n) in topics.items() if typ == "sensor_msgs/LaserScan"}
+    wanted = settings.scan_topic
+    found = {}
+    if wanted.startswith("/"):
+        if wanted in scans:
+            found[wanted.rsplit("/", 1)[0].strip("/")] = wanted
+    else:
+        suffix = "/" + wanted.strip("/")
+        for topic in scans:
+            if topic.endswith(suffix):
+                found[topic[: -len(suffix)].strip("/")] = topic
+    if settings.robots:
+        missing = [r for r in settings.robots if r.strip("/") not in found]
+        if missing:
+            raise MissingTopicError("no %s topic for robot namespace(s) %s; LaserScan topics in the bag: %s"
+                             % (wanted, ", ".join(missing), ", ".join(sorted(scans)) or "none"))
+        found = {r.strip("/"): found[r.strip("/")] for r in settings.robots}
+    if not found:
+        raise MissingTopicError("missing topic: no sensor_msgs/LaserScan topic matches %r; LaserScan topics in "
+                         "the bag: %s (choose one with --scan-topic)" % (wanted, ", ".join(sorted(scans)) or "none"))
+    return found
+
+
+class _Robot:
+    """One robot's layer core, handler and event queue."""
+
+    def __init__(self, replay, ns, scan_topic):
+        from sharing_handler_py.logic import SharingHandler
+        from sharing_handler_py.validation import Geometry
+        s = replay.settings
+        self.replay = replay
+        self.ns = ns
+        self.name = robot_name_of(ns, s.single_robot_name)
+        self.scan_topic = scan_topic
+        self.base_frame = _frame(ns, s.base_frame)
+        m = replay.map
+        self.geometry = core.GridGeometry(m.resolution, m.origin_x, m.origin_y, m.size_x, m.size_y)
+        self.handler_geometry = Geometry(m.resolution, m.origin_x, m.origin_y, m.size_x, m.size_y)
+        try:
+            params = core.LayerParams(robot_name=self.name, **s.layer)
+        except (TypeError, ValueError) as err:
+            raise InputError("bad layer parameter: %s" % err) from None
+        self.core = core.SharingCore(self.geometry, params)
+        self.core.set_static_map(replay.static)
+        rng = random.Random("%d/%s" % (s.seed, self.name))
+        self.handler = SharingHandler(
+            self.name, replay.clock, s.obstacle_duration, on_to_layer=self._to_layer,
+            on_to_fleet=self._to_fleet, on_expired=self._expired, geometry=self.handler_geometry,
+            max_cells_per_message=s.max_cells_per_message,
+            uuid_factory=lambda: str(uuidlib.UUID(int=rng.getrandbits(128), version=4)))
+        self.queue = collections.deque()
+        self.stuck_pending = None
+        self.scans = 0
+        self.scans_dropped = 0
+        self.path = []        # (x, y) of the sensor, every 10th scan, for the picture
+
+    # --- handler outputs ------------------------------------------------------------------
+    def _to_layer(self, obstacle):
+        result = self.core.apply_shared(self.replay.to_core(obstacle, self.geometry), self.replay.now)
+        if not result.ok:
+            self.replay.count("layer_rejected")
+            LOG.warning("%s: layer rejected obstacle %s from %s: %s", self.name, obstacle.uuid, obstacle.source,
+                        result.error)
+        if obstacle.source != self.name:
+            self.replay.emit("received", self.name, uuid=obstacle.uuid, source=obstacle.source,
+                             version=obstacle.version, marked=len(obstacle.marked), cleared=len(obstacle.cleared),
+                             cells=int(self.core.shared_cells(obstacle.uuid).size), applied=bool(result.ok))
+
+    def _to_fleet(self, obstacle):
+        self.replay.fleet_out(self, obstacle)
+
+    def _expired(self, uuid):
+        cells = int(self.core.shared_cells(uuid).size)
+        self.core.expire(uuid)
+        self.replay.emit("expiry", self.name, uuid=uuid, cells=cells)
+
+    # --- queue --------------------------------------------------------------------------------
+    def drain(self, force):
+        """Processes queued events in order while the head is ready (or all of them when forced)."""
+        replay = self.replay
+        while self.queue:
+            kind, payload, t = self.queue[0]
+            if kind == "scan" and not force:
+                stamp = payload.header.stamp.to_sec()
+                if not replay.chain.ready(replay.settings.global_frame, payload.header.frame_id, stamp) \
+                        and replay.now <= stamp + replay.settings.tf_wait:
+                    return
+            self.queue.popleft()
+            if kind == "scan":
+                self._scan(payload)
+            else:
+                self._trigger(payload, t)
+            replay.flush_fleet()
+
+    def _trigger(self, source, t):
+        self.replay.emit("trigger", self.name, source=source, pending=self.stuck_pending is None)
+        if self.stuck_pending is None:
+            self.stuck_pending = t
+
+    def _scan(self, msg):
+        replay = self.replay
+        s = replay.settings
+        stamp = msg.header.stamp.to_sec()
+        frame = msg.header.frame_id
+        try:
+            tr = replay.chain.lookup(s.global_frame, frame, stamp)
+            sx, sy, sz, syaw = tr[0], tr[1], tr[2], yaw_of(tr)
+            points = core.scan_to_points(np.asarray(msg.ranges), msg.angle_min, msg.angle_increment,
+                                         msg.range_min, msg.range_max, sx, sy, syaw, sz)
+        except TransformError as err:
+            self.scans_dropped += 1
+            replay.count("scans_" + err.reason)
+            replay.count_frame(err.reason, frame)
+            replay.note("scans_" + err.reason, "%s: scan at %.3f (frame %s) dropped: %s"
+                        % (self.name, stamp, frame, err))
+            return
+        except ValueError as err:
+            self.scans_dropped += 1
+            replay.count("scans_bad")
+            replay.note("scans_bad", "%s: scan at %.3f dropped: %s" % (self.name, stamp, err))
+            return
+        self.scans += 1
+        replay.scans += 1
+        if self.scans % 10 == 1:
+            self.path.append((sx, sy))
+        outcome = self.core.process_scan((sx, sy, sz), points, stamp)
+        if not outcome.origin_in_map:
+            replay.count("scans_origin_off_map")
+        for update in outcome.updates:
+            self.handler.on_internal_update(replay.to_obstacle(update, self.handler_geometry, s.global_frame))
+        if self.stuck_pending is not None:
+            trigger_time, self.stuck_pending = self.stuck_pending, None
+            if self.core.signal_stuck(trigger_time):
+                self._propose(stamp, (sx, sy))
+
+    def _propose(self, stamp, sensor_xy):
+        replay = self.replay
+        try:
+            tr = replay.chain.lookup(replay.settings.global_frame, self.base_frame, stamp)
+            rx, ry = tr[0], tr[1]
+        except TransformError as err:
+            replay.count("proposals_at_sensor_pose")
+            replay.note("proposals_at_sensor_pose", "%s: no pose of %s (%s); proposing around the laser instead"
+                        % (self.name, self.base_frame, err))
+            rx, ry = sensor_xy
+        from sharing_handler_py.validation import Obstacle, Rectangle
+        for proposal in self.core.propose(rx, ry):
+            cells = proposal.cells
+            before = self.handler.counters
+            obstacle = Obstacle(uuid="", marked=tuple(cells.tolist()), cleared=(), deadline=0,
+                                rectangle=Rectangle(*proposal.rectangle), source=self.name,
+                                geometry=self.handler_geometry, version=0, frame_id=replay.settings.global_frame,
+                                stamp=replay.now)
+            # The authorisation's own event is held back so that the file reads proposal, then authorised.
+            replay.hold_events()
+            shared = self.handler.on_proposal(obstacle)
+            held = replay.release_events()
+            after = self.handler.counters
+            outcome = ("authorised" if shared is not None else
+                       "redundant" if after["redundant"] > before["redundant"] else "dropped")
+            replay.emit("proposal", self.name, uuid=shared.uuid if shared is not None else None,
+                        cells=int(cells.size), rectangle=[round(v, 4) for v in proposal.rectangle],
+                        robot_xy=[round(rx, 3), round(ry, 3)], outcome=outcome)
+            for record in held:
+                replay.write_event(record)
+
+
+class Replay:
+    """Replays one bag. ``run(source)`` returns nothing; read ``problems``, ``events``, ``obstacles``."""
+
+    def __init__(self, settings, map_data=None, on_event=None, on_progress=None, progress_every=0.25):
+        self.settings = settings
+        self.map = map_data
+        self.static = None
+        self.on_event = on_event
+        self.on_progress = on_progress
+        self.progress_every = progress_every
+        self.chain = TransformChain(settings.tf_max_gap, settings.tf_tolerance)
+        self.now = 0.0
+        self.start_time = 0.0
+        self.end_time = 0.0
+        self.robots = {}
+        self.problems = collections.Counter()
+        self.frames_failed = collections.defaultdict(collections.Counter)   # reason -> frame -> count
+        self.notes = collections.defaultdict(list)                         # counter -> first lines
+        self.missing_topics = []
+        self.scans = 0
+        self.messages = 0
+        self.total_messages = 0
+        self.event_counts = collections.Counter()
+        self.bytes_plain = 0
+        self.bytes_compact = 0
+        self.fleet_messages = 0
+        self.obstacles = {}          # uuid -> dict (robot, time, rectangle, cell_time{cell: t}, cleared set)
+        self.wall_seconds = 0.0
+        self._outbox = collections.deque()
+        self._codec = None
+        self._held = None
+
+    # --- shared helpers -----------------------------------------------------------------------
+    def clock(self):
+        return self.now
+
+    def count(self, name, n=1):
+        self.problems[name] += n
+
+    def count_frame(self, reason, frame):
+        self.frames_failed[reason][frame or "(empty)"] += 1
+
+    def note(self, counter, line):
+        lines = self.notes[counter]
+        if len(lines) < 5:
+            lines.append(line)
+            LOG.warning("%s", line)
+
+    def emit(self, event, robot, **fields):
+        self.event_counts[event] += 1
+        record = {"time": round(self.now, 6), "t": round(self.now - self.start_time, 6), "robot": robot,
+                  "event": event}
+        record.update(fields)
+        if self._held is not None:
+            self._held.append(record)
+        else:
+            self.write_event(record)
+
+    def write_event(self, record):
+        if self.on_event is not None:
+            self.on_event(record)
+
+    def hold_events(self):
+        self._held = []
+
+    def release_events(self):
+        held, self._held = self._held or [], None
+        return held
+
+    @staticmethod
+    def to_core(obstacle, geometry):
+        return core.ObstacleUpdate(obstacle.uuid, np.asarray(obstacle.marked, dtype=np.uint32),
+                                   np.asarray(obstacle.cleared, dtype=np.uint32), obstacle.deadline,
+                                   obstacle.rectangle.as_list(), obstacle.source, geometry, obstacle.version,
+                                   obstacle.stamp)
+
+    @staticmethod
+    def to_obstacle(update, geometry, frame_id):
+        from sharing_handler_py.validation import Obstacle, Rectangle
+        return Obstacle(uuid=update.uuid, marked=tuple(update.marked.tolist()),
+                        cleared=tuple(update.cleared.tolist()), deadline=update.deadline,
+                        rectangle=Rectangle(*update.rectangle), source=update.source, geometry=geometry,
+                        version=update.version, frame_id=frame_id, stamp=update.stamp)
+
+    def payload_sizes(self, obstacle):
+        """Bytes of the Coaty Advertise payload of one fleet message: (plain, compact)."""
+        if self._codec is None:
+            from coaty_bridge import codec
+            self._codec = codec
+        codec = self._codec
+        g = obstacle.geometry
+        update = codec.ObstacleUpdate(
+            uuid=obstacle.uuid, source=obstacle.source, version=obstacle.version, stamp=max(0.0, obstacle.stamp),
+            frame_id=obstacle.frame_id, deadline=obstacle.deadline, rectangle=tuple(obstacle.rectangle.as_list()),
+            resolution=g.resolution, origin_x=g.origin_x, origin_y=g.origin_y, size_x=g.size_x, size_y=g.size_y,
+            marked=obstacle.marked, cleared=obstacle.cleared)
+        plain = len(codec.advertise_payload(codec.obstacle_to_object(update, compact_indexes=False)))
+        compact = len(codec.advertise_payload(codec.obstacle_to_object(update, compact_indexes=True)))
+        return plain, compact
+
+    def fleet_out(self, robot, obstacle):
+        plain, compact = self.payload_sizes(obstacle)
+        self.bytes_plain += plain
+        self.bytes_compact += compact
+        self.fleet_messages += 1
+        cells = int(robot.core.shared_cells(obstacle.uuid).size)
+        if obstacle.version == 1 and obstacle.uuid not in self.obstacles:
+            self.obstacles[obstacle.uuid] = {
+                "uuid": obstacle.uuid, "robot": robot.name, "time": self.now,
+                "rectangle": obstacle.rectangle.as_list(), "cell_time": {}, "cleared": set(), "updates": 0}
+            self.emit("authorised", robot.name, uuid=obstacle.uuid, version=1, cells=len(obstacle.marked),
+                      rectangle=[round(v, 4) for v in obstacle.rectangle.as_list()], deadline=obstacle.deadline,
+                      bytes_plain=plain, bytes_compact=compact)
+        else:
+            self.emit("update", robot.name, uuid=obstacle.uuid, version=obstacle.version,
+                      marked=len(obstacle.marked), cleared=len(obstacle.cleared), cells=cells,
+                      bytes_plain=plain, bytes_compact=compact)
+        record = self.obstacles.get(obstacle.uuid)
+        if record is not None:
+            if obstacle.version > 1:
+                record["updates"] += 1
+            for cell in obstacle.marked:
+                record["cell_time"].setdefault(cell, self.now)
+                record["cleared"].discard(cell)
+            record["cleared"].update(c for c in obstacle.cleared if c in record["cell_time"])
+        self._outbox.append((robot.name, obstacle))
+
+    def flush_fleet(self):
+        while self._outbox:
+            sender, obstacle = self._outbox.popleft()
+            for robot in self.robots.values():
+                if robot.name != sender:
+                    robot.handler.on_external(obstacle)
+
+    # --- set-up -------------------------------------------------------------------------------
+    def _prepare(self, source):
+        s = self.settings
+        topics = source.topics()
+        found = discover_robots(topics, s)
+        if self.map is None:
+            map_topic = "/map"
+            if map_topic not in topics:
+                raise InputError("no map: give --map <map.yaml> or --map-image <image> --resolution <m>; the bag "
+                                 "has no /map topic either")
+            for _topic, msg, _t in source.messages([map_topic]):
+                self.map = map_from_message(msg, map_topic)
+                break
+            if self.map is None:
+                raise InputError("no map: the bag's /map topic could not be read; give --map")
+        self.static = np.ascontiguousarray(static_costs(self.map, s.lethal_cost_threshold, s.track_unknown_space))
+        for ns in sorted(found):
+            robot = _Robot(self, ns, found[ns])
+            if robot.name in {r.name for r in self.robots.values()}:
+                raise InputError("two namespaces give the robot name %r" % robot.name)
+            self.robots[found[ns]] = robot
+        # Triggers.
+        self.trigger_topics = {}
+        kinds = {"auto": ("stuck_feedback", "recovery_status"), "both": ("stuck_feedback", "recovery_status"),
+                 "stuck_feedback": ("stuck_feedback",), "recovery_status": ("recovery_status",),
+                 "none": ()}[s.trigger]
+        for robot in self.robots.values():
+            present = []
+            for kind in kinds:
+                topic = _join(robot.ns, TRIGGER_TOPICS[kind])
+                if topic in topics:
+                    self.trigger_topics[topic] = (robot, kind)
+                    present.append(topic)
+                elif s.trigger != "auto":
+                    self.missing_topics.append(topic)
+            if s.trigger == "auto" and not present and not s.trigger_at:
+                self.missing_topics.append(" or ".join(_join(robot.ns, TRIGGER_TOPICS[k]) for k in kinds))
+        for topic in self.missing_topics:
+            LOG.warning("missing topic %s: no trigger from it, so nothing is proposed from it "
+                        "(use --trigger-at to trigger by time)", topic)
+        by_name = {r.name: r for r in self.robots.values()}
+        self.timed_triggers = []
+        for name, t in s.trigger_at:
+            if name is None:
+                targets = list(self.robots.values())
+            elif name in by_name:
+                targets = [by_name[name]]
+            else:
+                raise InputError("--trigger-at names robot %r; robots in the bag: %s"
+                                 % (name, ", ".join(sorted(by_name))))
+            for robot in targets:
+                self.timed_triggers.append((source.start_time + t, robot))
+        self.timed_triggers.sort(key=lambda item: item[0])
+        self.tf_topics = [t for t in ("/tf", "/tf_static") if t in topics]
+        if not self.tf_topics:
+            self.missing_topics.append("/tf")
+            LOG.warning("missing topic /tf: no scan can be placed in %s", s.global_frame)
+        replayed = list(self.robots) + list(self.trigger_topics) + self.tf_topics
+        self.total_messages = sum(topics[t][1] for t in replayed)
+        return replayed
+
+    # --- run ------------------------------------------------------------------------------------
+    def run(self, source):
+        wall_start = time.monotonic()
+        self.start_time, self.end_time = source.start_time, source.end_time
+        self.now = self.start_time
+        replayed = self._prepare(source)
+        expiry_period = 1.0 / self.settings.expiry_rate
+        next_expiry = self.start_time + expiry_period
+        timed = collections.deque(self.timed_triggers)
+        robots = list(self.robots.values())
+        last_progress = 0.0
+        for topic, msg, t in source.messages(replayed, numpy_topics=list(self.robots)):
+            self.messages += 1
+            if t > self.now:
+                self.now = t
+            while timed and timed[0][0] <= t:
+                when, robot = timed.popleft()
+                robot.queue.append(("trigger", "trigger_at", when))
+            while self.now >= next_expiry:
+                for robot in robots:
+                    robot.handler.expire()
+                next_expiry += expiry_period
+            robot = self.robots.get(topic)
+            if robot is not None:
+                robot.queue.append(("scan", msg, t))
+            elif topic == "/tf" or topic == "/tf_static":
+                static = topic == "/tf_static"
+                for transform in msg.transforms:
+                    self.chain.add(transform, static=static)
+            else:
+                trigger = self.trigger_topics.get(topic)
+                if trigger is not None:
+                    trigger[0].queue.append(("trigger", trigger[1], t))
+            for r in robots:
+                if r.queue:
+                    r.drain(force=False)
+            if self.on_progress is not None and self.messages % 64 == 0:
+                wall = time.monotonic()
+                if wall - last_progress >= self.progress_every:
+                    last_progress = wall
+                    self.on_progress(self, wall - wall_start)
+        while timed:
+            when, robot = timed.popleft()
+            robot.queue.append(("trigger", "trigger_at", when))
+        for r in robots:
+            r.drain(force=True)
+        self.flush_fleet()
+        for name, count in source.problems.items():
+            self.problems[name] += count
+        for line in source.notes:
+            if len(self.notes["bag"]) < 10:
+                self.notes["bag"].append(line)
+        if self.chain.rejected:
+            self.problems["tf_rejected"] = self.chain.rejected
+        self.wall_seconds = time.monotonic() - wall_start
+        if self.on_progress is not None:
+            self.on_progress(self, self.wall_seconds, final=True)
