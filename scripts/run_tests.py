@@ -1,11 +1,12 @@
 #!/usr/bin/python3
-"""Runs every test of the workspace: gtest binaries, pytest suites, rostests.
+"""Runs every test of the workspace: the package dependency check, gtest binaries, pytest
+suites, rostests.
 
 Each phase writes JUnit XML under test_results/, and the run ends with one line
 "N passed, N failed, N skipped". The exit code is non-zero when a test failed,
 when a phase could not run, or when no test ran at all.
 
-Usage: run_tests.py [--phase gtest|pytest|rostest ...] [-k PYTEST_EXPR]
+Usage: run_tests.py [--phase deps|gtest|pytest|rostest ...] [-k PYTEST_EXPR]
 """
 import argparse
 import glob
@@ -19,8 +20,11 @@ import xml.etree.ElementTree as ET
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "test_results")
 DEVEL = os.path.join(ROOT, "catkin_ws", "devel")
-PACKAGES = ["sharing_msgs", "sharing_layer_cpp", "sharing_handler_py",
-            "coaty_bridge", "fleet_sim", "launch", "tests"]
+# Package folders, bottom of the dependency graph first (scripts/check_package_deps.py checks it).
+PACKAGES = ["sharing_msgs", "sharing_layer_cpp", "sharing_handler_py", "coaty_bridge",
+            "fleet_sim", "fleet_nav", "sharing_replay", "launch", "tests"]
+# pytest folders that are not packages: the repository's own tools.
+TOOL_TEST_FOLDERS = ["scripts"]
 
 
 class Tally:
@@ -53,6 +57,20 @@ class Tally:
         self.failures.append(reason)
 
 
+def run_dependency_check(tally):
+    """Every package.xml declares what its code uses, and the declared graph has no cycle."""
+    xml = os.path.join(RESULTS, "deps", "package_deps.xml")
+    if os.path.exists(xml):
+        os.remove(xml)
+    print("[deps] scripts/check_package_deps.py", flush=True)
+    proc = subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "check_package_deps.py"),
+                           "--junit", xml], cwd=ROOT)
+    if os.path.exists(xml):
+        tally.add_junit(xml, "deps")
+    else:
+        tally.fail("deps: the dependency check crashed (exit %d, no result file)" % proc.returncode)
+
+
 def run_gtests(tally):
     binaries = sorted(p for p in glob.glob(os.path.join(DEVEL, "lib", "*", "test_*"))
                       if os.access(p, os.X_OK) and os.path.isfile(p))
@@ -75,7 +93,7 @@ def run_gtests(tally):
 def run_pytest(tally, expr):
     """One pytest process per package, so that one package's broken import or conftest cannot hide
     another package's results, and test module names only need to be unique within a package."""
-    packages = [pkg for pkg in PACKAGES if os.path.isdir(os.path.join(ROOT, pkg, "test"))]
+    packages = [pkg for pkg in PACKAGES + TOOL_TEST_FOLDERS if os.path.isdir(os.path.join(ROOT, pkg, "test"))]
     if not packages:
         tally.fail("pytest: no test folders found")
         return
@@ -131,13 +149,15 @@ def run_rostests(tally):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--phase", action="append", choices=["gtest", "pytest", "rostest"])
+    parser.add_argument("--phase", action="append", choices=["deps", "gtest", "pytest", "rostest"])
     parser.add_argument("-k", dest="expr", help="pytest -k expression")
     args = parser.parse_args()
-    phases = args.phase or ["gtest", "pytest", "rostest"]
+    phases = args.phase or ["deps", "gtest", "pytest", "rostest"]
     os.makedirs(RESULTS, exist_ok=True)
 
     tally = Tally()
+    if "deps" in phases:
+        run_dependency_check(tally)
     if "gtest" in phases:
         run_gtests(tally)
     if "pytest" in phases:
