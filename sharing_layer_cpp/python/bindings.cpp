@@ -366,6 +366,10 @@ PYBIND11_MODULE(_sharing_core, m)
       .def("apply_shared", &SharingCore::applyShared, py::arg("update"), py::arg("now"))
       .def("expire", &SharingCore::expire, py::arg("uuid"))
       .def("reset_obstacle_layer", &SharingCore::resetObstacleLayer)
+      .def("clear_obstacles_outside", &SharingCore::clearObstaclesOutside, py::arg("x0"), py::arg("y0"),
+           py::arg("x1"), py::arg("y1"),
+           "ClearCostmapRecovery's clearArea: obstacle cells outside the open cell window (x0, x1) x (y0, y1) "
+           "are cleared and no longer shareable; shared obstacles stay. Returns how many were cleared.")
       .def("draw_shared",
            [](const SharingCore& core, py::array_t<std::uint8_t, py::array::c_style> master) {
              core.drawShared(master.mutable_data(), static_cast<std::size_t>(master.size()));

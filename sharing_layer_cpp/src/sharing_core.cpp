@@ -335,6 +335,51 @@ void SharingCore::resetObstacleLayer()
   shareable_.clear();
 }
 
+std::size_t SharingCore::clearObstaclesOutside(int x0, int y0, int x1, int y1)
+{
+  const GridGeometry& g = geometry();
+  const std::uint8_t cleared_value = obstacles_.defaultValue();
+  // The window is open on every side, as in costmap_2d: clearArea keeps x0 < x < x1, y0 < y < y1.
+  auto inside = [&](unsigned int mx, unsigned int my) {
+    return static_cast<long>(mx) > x0 && static_cast<long>(mx) < x1 && static_cast<long>(my) > y0 &&
+           static_cast<long>(my) < y1;
+  };
+  std::size_t cleared = 0;
+  for (unsigned int my = 0; my < g.size_y; ++my)
+  {
+    for (unsigned int mx = 0; mx < g.size_x; ++mx)
+    {
+      if (inside(mx, my))
+      {
+        continue;
+      }
+      const std::uint32_t index = g.getIndex(mx, my);
+      if (obstacles_.at(index) != cleared_value)
+      {
+        cleared += obstacles_.at(index) == LETHAL_OBSTACLE ? 1 : 0;
+        obstacles_.set(index, cleared_value);
+      }
+    }
+  }
+  std::vector<std::uint32_t> kept;
+  kept.reserve(shareable_.size());
+  for (std::uint32_t index : shareable_)
+  {
+    unsigned int mx, my;
+    g.indexToCells(index, mx, my);
+    if (inside(mx, my))
+    {
+      kept.push_back(index);
+    }
+    else
+    {
+      is_shareable_[index] = 0;
+    }
+  }
+  shareable_.swap(kept);
+  return cleared;
+}
+
 void SharingCore::drawShared(std::uint8_t* master, std::size_t cell_count) const
 {
   if (cell_count != geometry().cellCount())

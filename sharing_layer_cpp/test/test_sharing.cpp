@@ -244,6 +244,27 @@ TEST(Overlay, SharedCellsAreDrawnAloneAndSurviveTheObstacleReset)
   EXPECT_EQ((std::vector<std::uint32_t>{ cell(30, 30), cell(31, 30) }), core.sharedCells("a"));
 }
 
+TEST(Overlay, ClearOutsideAWindowKeepsTheWindowAndSharedObstacles)
+{
+  // move_base's conservative reset around a robot at cell (20, 20): marks near it stay, far marks go.
+  SharingCore core(grid40(), params());
+  const Point3 robot = centre(20, 20);
+  core.processScan(scan(robot, { centre(23, 20), centre(20, 38) }), 0.0);
+  ASSERT_TRUE(core.applyShared(share("a", { cell(2, 2) }, Subsection(0.15, 0.15, 0.3, 0.3)), 0.0).ok);
+  ASSERT_EQ(LETHAL_OBSTACLE, core.obstacleGrid().at(cell(20, 38)));
+  ASSERT_EQ(2u, core.shareableCells().size());
+
+  EXPECT_EQ(1u, core.clearObstaclesOutside(14, 14, 26, 26));
+  EXPECT_EQ(LETHAL_OBSTACLE, core.obstacleGrid().at(cell(23, 20)));
+  EXPECT_EQ(FREE_SPACE, core.obstacleGrid().at(cell(20, 38)));
+  EXPECT_EQ((std::vector<std::uint32_t>{ cell(23, 20) }), core.shareableCells());
+  EXPECT_EQ((std::vector<std::uint32_t>{ cell(2, 2) }), core.sharedCells("a"));
+  // The window is open, as costmap_2d's clearArea: a mark on its border line is cleared too.
+  core.processScan(scan(robot, { centre(26, 20) }), 1.0);
+  EXPECT_EQ(1u, core.clearObstaclesOutside(14, 14, 26, 26));
+  EXPECT_EQ(FREE_SPACE, core.obstacleGrid().at(cell(26, 20)));
+}
+
 TEST(Proposals, TriggerThenProposeFromShareableCells)
 {
   SharingCore core(grid40(), params());

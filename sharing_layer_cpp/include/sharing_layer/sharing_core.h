@@ -101,6 +101,12 @@ public:
   /// cells are cleared; shared obstacles stay.
   void resetObstacleLayer();
 
+  /// @brief What move_base's ClearCostmapRecovery does to a layer (CostmapLayer::clearArea with
+  /// invert_area false): every obstacle-grid cell outside the open window (x0, x1) x (y0, y1) goes
+  /// back to its default value, and stops being shareable. Shared obstacles stay.
+  /// @return the number of cells that held an obstacle and were cleared
+  std::size_t clearObstaclesOutside(int x0, int y0, int x1, int y1);
+
   /// @brief Sets every present shared cell to lethal in a master grid of the same geometry,
   /// touching no other cell and never lowering a cost. @throws std::invalid_argument on a size mismatch
   void drawShared(std::uint8_t* master, std::size_t cell_count) const;
