@@ -13,7 +13,7 @@ nav = pytest.importorskip("fleet_nav.nav_core")
 
 from fleet_nav.costmap import GlobalCostmap, static_costs  # noqa: E402
 from fleet_nav.errors import GoalRejected, ParameterError  # noqa: E402
-from fleet_nav.navigator import Event, Navigator  # noqa: E402
+from fleet_nav.navigator import ABORT_TEXT, Event, Navigator, RecoveryTrigger, State  # noqa: E402
 from fleet_nav.params import NavParams, inscribed_radius  # noqa: E402
 
 # The shared data: $FLEET_SHARED_DATA, else ../shared/data beside the repository.
@@ -49,8 +49,14 @@ def test_tutorial_files_load_with_their_values():
     assert params.footprint[0] == pytest.approx((-0.345, -0.345))
     assert params.inscribed_radius == pytest.approx(0.345)
     assert params.max_vel_x == 0.65 and params.xy_goal_tolerance == 0.1
-    # The way past a blockage is searched in the local costmap's 6 m x 6 m rolling window.
-    assert params.local_window == 6.0 and "local_costmap/width" not in unused
+    # The local controller fails where base_local_planner's forward simulation reaches.
+    assert params.sim_time == 1.7 and params.blocked_lookahead == pytest.approx(1.7 * 0.65)
+    assert params.acc_lim_th == 3.2 and params.min_in_place_rotational_vel == 0.4
+    # The tutorials set none of move_base's own parameters: move_base's defaults hold.
+    assert params.planner_frequency == 0.0 and params.planner_patience == 5.0
+    assert params.controller_patience == 15.0 and params.oscillation_timeout == 0.0
+    assert params.recovery_behavior_enabled and params.clearing_rotation_allowed
+    assert params.conservative_reset_dist == 3.0 and not params.stuck_feedback_on_local_failure
     assert "local_costmap/resolution" in unused and "global_costmap/map_type" in unused
     assert "global_costmap/obstacle_range" not in unused
 
@@ -60,13 +66,18 @@ def test_tutorial_files_load_with_their_values():
     ("planner_frequency", 500.0, ["planner_frequency", "500"]),
     ("update_frequency", 0.0, ["update_frequency", "0.0"]),
     ("footprint", "[[0, 0], [1]]", ["footprint"]),
-    ("max_failures", 0, ["max_failures", "0"]),
+    ("max_planning_retries", -2, ["max_planning_retries", "-2"]),
+    ("planner_patience", -1.0, ["planner_patience", "-1.0"]),
+    ("stuck_feedback_on_local_failure", "yes", ["stuck_feedback_on_local_failure", "yes"]),
+    ("conservative_reset/layer_names", "obstacle_layer", ["conservative_reset/layer_names"]),
     ("cost_scaling_factor", "ten", ["cost_scaling_factor", "ten"]),
 ])
 def test_bad_parameters_name_the_parameter_and_value(key, value, words):
     tree = {"global_costmap": {}}
     if key in ("inflation_radius", "update_frequency", "footprint", "cost_scaling_factor"):
         tree["global_costmap"][key] = value
+    elif "/" in key:
+        tree[key.split("/")[0]] = {key.split("/")[1]: value}
     else:
         tree[key] = value
     with pytest.raises(ParameterError) as err:
@@ -100,8 +111,8 @@ def room(block_upper_door=False):
 
 
 def make(params=None, occ=None):
-    params = params or NavParams(robot_radius=0.2, inflation_radius=0.4, planner_frequency=0.5,
-                                 local_window=5.0, max_failures=3)
+    params = params or NavParams(robot_radius=0.2, inflation_radius=0.4, max_vel_x=0.5, sim_time=1.7,
+                                 xy_goal_tolerance=0.2, yaw_goal_tolerance=0.2)
     occ = room() if occ is None else occ
     geometry = core.GridGeometry(RES, 0.0, 0.0, occ.shape[1], occ.shape[0])
     layer = core.LayerParams(obstacle_range=2.5, raytrace_range=3.0, robot_name="robot_0")
@@ -146,39 +157,219 @@ def test_plan_goes_through_the_nearer_door_and_robot_reaches_goal():
     assert math.hypot(pose[0] - 8.0, pose[1] - 1.3) <= navigator.params.xy_goal_tolerance
 
 
-def test_blocked_door_reports_stuck_once_then_takes_the_other_door():
-    cm, navigator = make()
-    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+def approach_lower_door(navigator):
     pose, now, events = (1.0, 1.3, 0.0), 0.0, []
     while pose[0] < 2.3 and now < 20.0:       # until the block is within obstacle_range (2.5 m)
         pose, now, more = drive(navigator, pose, now, 0.1)
         events += more
-    assert Event.PLANNED in events and Event.STUCK not in events
-    # The robot now sees the lower door closed.
+    return pose, now, events
+
+
+def test_a_blocked_door_is_a_silent_replan_through_the_other_door_as_in_move_base():
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    pose, now, events = approach_lower_door(navigator)
+    assert events == [Event.PLANNED] and navigator.state is State.CONTROLLING
+    mark_block(cm, 4.75, 0.75, 4.95, 1.85, pose)        # the robot now sees the lower door closed
+    # planner_frequency 0 (move_base's default): the plan is kept until the controller fails.
+    pose, now, events = drive(navigator, pose, now, 0.1)
+    assert events == [] and navigator.path_xy[:, 1].max() < 2.5
+    pose, now, events = drive(navigator, pose, now, 120.0)
+    assert navigator.local_failures == 1                # once the block is within the local planner's reach
+    assert events.count(Event.PLANNED) == 1 and Event.STUCK not in events and Event.RECOVERY not in events
+    assert events[-1] is Event.SUCCEEDED and pose[1] < 2.0 and pose[0] > 7.0
+
+
+def test_the_thesis_mode_reports_the_local_failure_as_stuck():
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, max_vel_x=0.5, sim_time=1.7, xy_goal_tolerance=0.2,
+                       yaw_goal_tolerance=0.2, stuck_feedback_on_local_failure=True)
+    cm, navigator = make(params)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    pose, now, _ = approach_lower_door(navigator)
     mark_block(cm, 4.75, 0.75, 4.95, 1.85, pose)
     pose, now, events = drive(navigator, pose, now, 120.0)
-    assert events.count(Event.STUCK) == 1
-    assert Event.SUCCEEDED in events
-    assert navigator.failures == 1
+    assert events.count(Event.STUCK) == 1 and events[-1] is Event.SUCCEEDED
 
 
-def test_block_with_room_to_pass_is_no_failure():
+def test_with_a_planner_frequency_the_block_is_planned_around_before_the_controller_reaches_it():
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, max_vel_x=0.5, sim_time=1.7, xy_goal_tolerance=0.2,
+                       yaw_goal_tolerance=0.2, planner_frequency=1.0, stuck_feedback_on_local_failure=True)
+    cm, navigator = make(params)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    pose, now, _ = approach_lower_door(navigator)
+    mark_block(cm, 4.75, 0.75, 4.95, 1.85, pose)
+    pose, now, events = drive(navigator, pose, now, 1.1)
+    assert Event.PLANNED in events and navigator.path_xy[:, 1].max() > 4.0
+    pose, now, events = drive(navigator, pose, now, 120.0)
+    assert navigator.local_failures == 0 and Event.STUCK not in events and events[-1] is Event.SUCCEEDED
+
+
+def test_a_box_on_the_plan_is_replanned_around_without_a_recovery():
     cm, navigator = make()
     navigator.set_goal(4.0, 3.0, 0.0, 0.0)
     pose, now, events = drive(navigator, (1.0, 3.0, 0.0), 0.0, 1.0)
     mark_block(cm, 2.5, 2.9, 2.7, 3.1, pose)            # a small box on the straight line
     pose, now, events = drive(navigator, pose, now, 60.0)
-    assert Event.STUCK not in events and Event.SUCCEEDED in events
+    assert Event.STUCK not in events and Event.RECOVERY not in events and Event.SUCCEEDED in events
 
 
-def test_both_doors_closed_aborts_after_max_failures():
+def test_no_plan_for_planner_patience_runs_the_recoveries_in_move_base_order_then_aborts():
     occ = room()
-    occ[:, 100] = 100
+    occ[:, 100] = 100                                   # both doors closed
     cm, navigator = make(occ=occ)
     navigator.set_goal(8.0, 1.3, 0.0, 0.0)
-    _, _, events = drive(navigator, (2.0, 1.3, 0.0), 0.0, 30.0)
-    assert events[-1] is Event.ABORTED and Event.SUCCEEDED not in events
-    assert navigator.failures == navigator.params.max_failures and not navigator.active
+    pose, now, recoveries, planning_until = (2.0, 1.3, 0.0), 0.0, [], None
+    while navigator.active and now < 200.0:
+        step = navigator.tick(now, pose)
+        if step.recovery:
+            recoveries.append((now, step.recovery))
+            planning_until = planning_until or now
+        x, y, yaw = pose
+        pose = (x, y, yaw + step.angular * 0.1)
+        now += 0.1
+    # planner_patience (5 s) of failed planning, then CLEARING; the next cycle runs the recovery.
+    assert planning_until == pytest.approx(navigator.params.planner_patience + 0.2, abs=0.11)
+    assert [r[1] for r in recoveries] == [(0, 4, "conservative_reset"), (1, 4, "rotate_recovery"),
+                                          (2, 4, "aggressive_reset"), (3, 4, "rotate_recovery")]
+    assert Event.ABORTED in step.events and step.reason == ABORT_TEXT[RecoveryTrigger.PLANNING]
+    assert not navigator.active
+    # Each recovery restarts the patience: the next one follows planner_patience later.
+    gaps = np.diff([r[0] for r in recoveries])
+    assert (gaps >= navigator.params.planner_patience - 0.05).all()
+
+
+def test_max_planning_retries_ends_planning_before_the_patience_does():
+    occ = room()
+    occ[:, 100] = 100
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, max_planning_retries=2)
+    cm, navigator = make(params, occ)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    steps, states = [], []
+    for t in range(4):
+        steps.append(navigator.tick(t * 0.1, (2.0, 1.3, 0.0)))
+        states.append(navigator.state)
+    # Retries 1 and 2 are allowed, the 3rd failure clears; the next cycle runs the first recovery.
+    assert states == [State.PLANNING, State.PLANNING, State.CLEARING, State.PLANNING]
+    assert [s.recovery for s in steps] == [None, None, None, (0, 4, "conservative_reset")]
+
+
+def test_without_recovery_behaviours_a_planning_failure_aborts_at_once_after_the_patience():
+    occ = room()
+    occ[:, 100] = 100
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, recovery_behavior_enabled=False)
+    cm, navigator = make(params, occ)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    now, events = 0.0, []
+    while navigator.active and now < 20.0:
+        events += navigator.tick(now, (2.0, 1.3, 0.0)).events
+        now += 0.1
+    assert events == [Event.ABORTED] and now == pytest.approx(5.2, abs=0.15)
+
+
+def failing_controller(navigator, why="no command"):
+    navigator._compute_velocity = lambda now, pose: (None, why)
+
+
+def test_a_controller_failure_replans_until_controller_patience_then_clears():
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    navigator.tick(0.0, (2.0, 1.3, 0.0))
+    assert navigator.state is State.CONTROLLING and navigator.last_valid_control == 0.0
+    failing_controller(navigator)
+    step = navigator.tick(0.1, (2.0, 1.3, 0.0))
+    assert navigator.state is State.PLANNING and step.linear == step.angular == 0.0
+    now, states = 0.2, []
+    while now < navigator.params.controller_patience + 1.0:
+        step = navigator.tick(now, (2.0, 1.3, 0.0))
+        states.append(navigator.state)
+        if step.recovery:
+            break
+        now += 0.1
+    # The replan succeeds every time, the controller keeps failing: after controller_patience
+    # (15 s) since the last valid command, move_base clears with the CONTROLLING trigger.
+    assert now == pytest.approx(navigator.params.controller_patience + 0.2, abs=0.11)
+    assert step.recovery == (0, 4, "conservative_reset")
+    assert navigator.recovery_trigger is RecoveryTrigger.CONTROLLING
+    assert navigator.state is State.PLANNING           # after the recovery, as move_base
+
+
+def test_a_valid_command_after_a_controller_recovery_starts_the_list_again():
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    navigator.tick(0.0, (2.0, 1.3, 0.0))
+    real = navigator._compute_velocity
+    failing_controller(navigator)
+    now = 0.1
+    while navigator.recovery_index == 0:
+        navigator.tick(now, (2.0, 1.3, 0.0))
+        now += 0.1
+    assert navigator.recovery_index == 1
+    navigator._compute_velocity = real
+    navigator.tick(now, (2.0, 1.3, 0.0))               # PLANNING -> CONTROLLING -> a valid command
+    assert navigator.state is State.CONTROLLING and navigator.recovery_index == 0
+
+
+def test_oscillation_timeout_clears_with_the_oscillation_trigger_and_a_move_resets_the_list():
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, oscillation_timeout=10.0, oscillation_distance=0.5)
+    cm, navigator = make(params)
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    now, k, step = 0.0, 0, None
+    while now < 12.0:
+        pose = (3.0 + (0.2 if k % 20 < 10 else 0.0), 1.3, 0.0)   # back and forth within 0.5 m
+        step = navigator.tick(now, pose)
+        if step.recovery:
+            break
+        now, k = now + 0.1, k + 1
+    assert now == pytest.approx(10.1, abs=0.15) and step.recovery == (0, 4, "conservative_reset")
+    assert navigator.recovery_trigger is RecoveryTrigger.OSCILLATION
+    navigator.tick(now + 0.1, (3.8, 1.3, 0.0))          # a move of more than oscillation_distance
+    assert navigator.recovery_index == 0
+
+
+def test_oscillation_is_not_checked_with_move_bases_default_timeout():
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    for k in range(600):
+        step = navigator.tick(k * 0.1, (3.0 + (0.2 if k % 20 < 10 else 0.0), 1.3, 0.0))
+        assert step.recovery is None
+
+
+def test_conservative_reset_clears_own_marks_beyond_3_m_and_keeps_shared_and_near_ones():
+    cm, navigator = make()
+    g = cm.geometry
+    mark_block(cm, 3.0, 1.2, 3.1, 1.4, (2.0, 1.3))         # 1 m from the robot: kept
+    mark_block(cm, 2.0, 3.5, 2.1, 3.6, (2.0, 1.3))         # 2.2 m away, outside the 3 m square
+    cells = np.array([int(3.05 / RES) * g.size_x + 20], dtype=np.uint32)
+    update = core.ObstacleUpdate("u1", cells, np.zeros(0, np.uint32), 60, [0.95, 3.0, 1.05, 3.1], "robot_1", g, 1, 0.0)
+    assert cm.layer.apply_shared(update, 0.0).ok
+    cleared = cm.clear_obstacles_outside(2.0, 1.3, 3.0, ("obstacle_layer",))
+    cm.update(2.0, 1.3)
+    assert cleared > 0
+    assert cm.costs[int(1.3 / RES), int(3.05 / RES)] == 254
+    assert cm.costs[int(3.55 / RES), int(2.05 / RES)] < 253
+    assert cm.costs[int(3.05 / RES), 20] == 254            # the shared obstacle stays
+    # A layer name move_base would not clear leaves the layer alone.
+    mark_block(cm, 2.0, 3.5, 2.1, 3.6, (2.0, 1.3))
+    assert cm.clear_obstacles_outside(2.0, 1.3, 3.0, ("voxel_layer",)) == 0
+
+
+def test_rotate_recovery_turns_a_full_circle_in_place():
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    navigator.tick(0.0, (2.0, 3.0, 0.0))
+    navigator.state, navigator.recovery_index = State.CLEARING, 1   # rotate_recovery is next
+    pose, now, turned, recovery = (2.0, 3.0, 0.0), 0.1, 0.0, None
+    while now < 30.0:
+        step = navigator.tick(now, pose)
+        recovery = recovery or step.recovery
+        if navigator.state is not State.CLEARING:
+            break
+        assert step.linear == 0.0 and step.angular > 0.0
+        turned += step.angular * 0.1
+        pose = (pose[0], pose[1], pose[2] + step.angular * 0.1)
+        now += 0.1
+    assert recovery == (1, 4, "rotate_recovery")
+    assert 2 * math.pi - navigator.params.yaw_goal_tolerance <= turned <= 2 * math.pi + 0.15
 
 
 def test_goals_outside_or_in_obstacles_are_rejected_with_a_reason():
@@ -226,33 +417,6 @@ def test_snapshot_draws_shared_obstacles_in_their_colour(tmp_path):
     assert (px == snapshot.PLAN_RGB).all(axis=-1).sum() > 50
 
 
-def test_a_blockage_that_fades_after_the_stuck_is_not_reported_again():
-    # After a stop about obstacle_range before a block, turning away erases part of its face
-    # (cells seen between obstacle_range and raytrace_range are cleared, as in costmap_2d). The
-    # navigator remembers the blockage for this goal, so it does not turn back into it.
-    cm, navigator = make()
-    block = (4.75, 0.75, 4.95, 1.85)
-    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
-    pose, now, events, faded = (1.0, 1.3, 0.0), 0.0, [], False
-    while now < 120.0 and Event.SUCCEEDED not in events and Event.ABORTED not in events:
-        # The laser sees the block's face within obstacle_range (2.5 m).
-        if math.hypot(pose[0] - block[0], pose[1] - 1.3) < 2.5:
-            mark_block(cm, *block, pose)
-        if Event.STUCK in events and not faded:
-            cm.reset_obstacle_layer()              # the whole face is gone from the obstacle layer
-            cm.update(pose[0], pose[1])
-            faded = True
-        pose, now, more = drive(navigator, pose, now, 0.1)
-        events += more
-    assert events.count(Event.STUCK) == 1 and Event.SUCCEEDED in events
-    # A new goal forgets the blockage.
-    cm.reset_obstacle_layer()
-    cm.update(2.0, 1.3)
-    navigator.set_goal(8.0, 1.3, 0.0, now)
-    navigator.tick(now, (2.0, 1.3, 0.0))
-    assert navigator.path_xy[:, 1].max() < 2.5
-
-
 def narrow_door_room(door_width):
     occ = room()
     occ[int(0.8 / RES):int(1.8 / RES), 100] = 100
@@ -265,8 +429,7 @@ def narrow_door_room(door_width):
 def test_plans_keep_a_clearance_margin_where_there_is_room(margin, lower_door):
     # The lower door is 0.6 m: the robot (inscribed 0.2 m) fits, but a scan endpoint one cell in
     # front of the door frame closes it. With the margin the plan takes the wide upper door.
-    params = NavParams(robot_radius=0.2, inflation_radius=0.4, planner_frequency=0.5, local_window=5.0,
-                       max_failures=3, clearance_margin=margin)
+    params = NavParams(robot_radius=0.2, inflation_radius=0.4, clearance_margin=margin)
     cm, navigator = make(params, narrow_door_room(0.6))
     navigator.set_goal(8.0, 1.3, 0.0, 0.0)
     assert Event.PLANNED in navigator.tick(0.0, (2.0, 1.3, 0.0)).events
@@ -281,14 +444,7 @@ def test_the_only_narrow_way_is_still_planned():
     assert Event.PLANNED in navigator.tick(0.0, (2.0, 1.3, 0.0)).events
 
 
-def test_local_window_comes_from_the_local_costmap_and_must_reach_past_the_lookahead():
-    params, _ = NavParams.from_dict({"local_costmap": {"width": 5.0, "height": 4.5}})
-    assert params.local_window == 4.5
-    with pytest.raises(ParameterError, match=r"local_window \(3.0 m\).*blocked_lookahead \(2.0 m\)"):
-        NavParams.from_dict({"local_costmap": {"width": 3.0, "height": 3.0}})
-
-
-def test_a_stalled_turn_is_escaped_the_other_way_before_it_counts_as_a_failure():
+def test_a_stalled_turn_is_escaped_the_other_way_without_a_controller_failure():
     # The body touches something the footprint check cannot see (a Stage model larger than the
     # configured footprint): turning left does not move the robot. The goal is behind it.
     cm, navigator = make()
@@ -304,44 +460,4 @@ def test_a_stalled_turn_is_escaped_the_other_way_before_it_counts_as_a_failure()
         pose = (x + step.linear * math.cos(yaw) * 0.1, y + step.linear * math.sin(yaw) * 0.1, yaw + step.angular * 0.1)
         now += 0.1
     assert escaped
-    assert events == [Event.SUCCEEDED] and navigator.failures == 0
-    assert now < navigator.params.stuck_timeout
-
-
-def test_going_back_and_forth_without_getting_closer_is_a_failure_and_the_replan_avoids_that_way(caplog):
-    # Something unseen holds the robot in front of the lower door: it moves, but only back and forth.
-    cm, navigator = make()
-    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
-    now, k, old_plan = 0.0, 0, None
-    with caplog.at_level("WARNING", logger="fleet_nav.navigator"):
-        while now < navigator.params.stuck_timeout + 5.0 and navigator.failures == 0:
-            pose = (3.0 + (0.15 if k % 20 < 10 else 0.0), 1.3, 0.0)
-            old_plan = navigator.path_xy.copy()
-            navigator.tick(now, pose)
-            now, k = now + 0.1, k + 1
-    assert navigator.failures == 1
-    assert now > navigator.params.stuck_timeout
-    assert "no progress for 20.0 s at (3." in caplog.text and "last command" in caplog.text
-
-    def cells_ahead(plan):
-        d = np.hypot(plan[:, 0] - pose[0], plan[:, 1] - pose[1])
-        return {cm.world_to_cell(x, y) for x, y in plan[(d > 0.4) & (d < 1.4)]}
-    # The next plan does not take the cells ahead it could not make progress along.
-    step = navigator.tick(now, pose)
-    assert Event.PLANNED in step.events
-    assert cells_ahead(old_plan) and not cells_ahead(old_plan) & cells_ahead(navigator.path_xy)
-
-
-def test_a_block_seen_when_a_replan_is_due_is_a_stuck_not_a_silent_reroute():
-    # The laser marks the block 2.5 m out, the path check looks blocked_lookahead (2 m) ahead: a
-    # periodic replan falling in between must not route around the block without a stuck_feedback.
-    cm, navigator = make()
-    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
-    pose, now = (1.0, 1.3, 0.0), 0.0
-    while pose[0] < 2.3 and now < 20.0:
-        pose, now, _ = drive(navigator, pose, now, 0.1)
-    mark_block(cm, 4.75, 0.75, 4.95, 1.85, pose)        # the door is closed 2.3-2.5 m ahead
-    assert navigator._blocked_at(pose, navigator.params.blocked_lookahead) == -1
-    navigator.next_plan = now                           # the periodic replan is due on this tick
-    step = navigator.tick(now, pose)
-    assert step.events == [Event.STUCK]
+    assert events == [Event.SUCCEEDED] and navigator.local_failures == 0

@@ -93,6 +93,27 @@ class GlobalCostmap:
         self.layer.reset_obstacle_layer()
         self.request_full_update()
 
+    # costmap_2d names the obstacle layer of old-style parameter files (the tutorials') this way;
+    # the sharing layer takes its place in fleet_nav's global costmap.
+    OBSTACLE_LAYER_NAME = "obstacle_layer"
+
+    def clear_obstacles_outside(self, x, y, reset_distance, layer_names):
+        """move_base's ClearCostmapRecovery on the global costmap: when the obstacle layer is one of
+        layer_names, its cells outside a reset_distance square centred on (x, y) are cleared (shared
+        obstacles stay). Returns the number of obstacle cells cleared."""
+        if self.OBSTACLE_LAYER_NAME not in layer_names:
+            return 0
+        g = self.geometry
+        half = reset_distance / 2.0
+        # worldToMapNoBounds: cells may lie off the map; the window is open on every side.
+        x0 = int((x - half - g.origin_x) / g.resolution)
+        y0 = int((y - half - g.origin_y) / g.resolution)
+        x1 = int((x + half - g.origin_x) / g.resolution)
+        y1 = int((y + half - g.origin_y) / g.resolution)
+        cleared = self.layer.clear_obstacles_outside(x0, y0, x1, y1)
+        self.request_full_update()
+        return cleared
+
     def world_to_cell(self, x, y):
         return self.geometry.world_to_map(x, y)
 

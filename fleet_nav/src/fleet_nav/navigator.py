@@ -1,25 +1,36 @@
-"""Global planning, path following and stuck detection of fleet_nav, without ROS.
+"""move_base's state machine for fleet_nav, without ROS.
 
-``Navigator.tick(now, pose)`` is called at controller_frequency with the robot's pose in the
-costmap frame and returns a ``Step``: the velocity command and the events of this tick.
-It plans with the C++ A* on the inflated costmap, replans every 1/planner_frequency seconds (so a
-driving robot switches route when a shared obstacle arrives), and checks the path ahead
-(``blocked_lookahead`` metres) against the current costmap on every tick. When the path ahead is
-blocked it looks for a way past inside a ``local_window`` square around the robot (a windowed A*
-to the first free path cell behind the blockage); only when there is none it counts a failure and
-reports ``STUCK`` once, stops, and replans at once. ``max_failures`` failures (stuck, no global
-plan, or no progress for ``stuck_timeout`` seconds) abort the goal.
+``Navigator.tick(now, pose)`` is move_base's ``executeCycle``, called at controller_frequency
+with the robot's pose in the costmap frame; it returns a ``Step``: the velocity command and the
+events of this cycle. The states and transitions are move_base's (move_base.cpp, noetic):
 
-Plans keep ``clearance_margin`` metres more than the inscribed radius from obstacles where they can
-(a second A* without the margin is the fallback): a passage only just wider than the robot in the
-static map is closed by the first scan whose endpoints fall one cell in front of the mapped wall.
+- PLANNING: the global planner (A* on the inflated costmap) runs. A plan → CONTROLLING. No plan:
+  retried every cycle until ``planner_patience`` seconds have passed since the last valid plan
+  (or more than ``max_planning_retries`` retries, when that is >= 0) → CLEARING (trigger PLANNING).
+- CONTROLLING: the local controller follows the plan; with ``planner_frequency`` > 0 the plan is
+  replaced every 1/planner_frequency s (a failed replan keeps the old plan). The goal reached
+  (xy and yaw tolerance) → SUCCEEDED. No valid command → PLANNING while less than
+  ``controller_patience`` s have passed since the last valid command, else CLEARING (trigger
+  CONTROLLING). No move of ``oscillation_distance`` for ``oscillation_timeout`` s (0 = off)
+  → CLEARING (trigger OSCILLATION).
+- CLEARING: the next recovery behaviour in move_base's default order (conservative_reset,
+  rotate_recovery, aggressive_reset, rotate_recovery; rotations only with
+  ``clearing_rotation_allowed``, none without ``recovery_behavior_enabled``) runs, announced
+  by a RECOVERY event (the node publishes move_base's RecoveryStatus), then PLANNING. With no
+  behaviour left the goal is ABORTED with move_base's text for the trigger. A valid plan (after a
+  PLANNING trigger), a valid command (after a CONTROLLING trigger) or a move (after an
+  OSCILLATION trigger) starts the recovery list again.
 
-A blockage that made the robot stuck is remembered until the goal ends: the blocked (inscribed or
-lethal) cells of the local window at that moment stay blocked for planning. Without this memory the
-robot oscillates: the obstacle layer clears cells seen between ``obstacle_range`` and
-``raytrace_range`` (costmap_2d semantics), so a robot that stops about obstacle_range before a
-block and turns away erases part of its face, the next periodic replan runs through the block
-again, and the robot reports the same blockage a second time.
+The local controller is our stand-in for base_local_planner: pure pursuit along the plan with
+each command checked by rolling the footprint forward on the costmap (``_follow``). Its
+computeVelocityCommands fails where base_local_planner's does: when the plan within its forward
+simulation (``blocked_lookahead`` m, by default the local planner's sim_time x max_vel_x) runs
+through an inscribed or lethal cell, or when no command is free of lethal cells. It also escapes
+a stall (commands that do not move the robot: a Stage body that touches what the footprint check
+did not see), which base_local_planner does with escape_vel.
+
+move_base publishes no stuck_feedback. With ``stuck_feedback_on_local_failure`` (the thesis's
+modified move_base) a failed computeVelocityCommands is reported as a STUCK event.
 """
 import enum
 import logging
@@ -34,9 +45,30 @@ from fleet_nav import nav_core as nav
 LOG = logging.getLogger(__name__)
 
 
+class State(enum.Enum):
+    PLANNING = "planning"
+    CONTROLLING = "controlling"
+    CLEARING = "clearing"
+
+
+class RecoveryTrigger(enum.Enum):
+    PLANNING = "planning"
+    CONTROLLING = "controlling"
+    OSCILLATION = "oscillation"
+
+
+# move_base's words when it gives up (MoveBase::executeCycle, CLEARING state).
+ABORT_TEXT = {
+    RecoveryTrigger.CONTROLLING: "Failed to find a valid control. Even after executing recovery behaviors.",
+    RecoveryTrigger.PLANNING: "Failed to find a valid plan. Even after executing recovery behaviors.",
+    RecoveryTrigger.OSCILLATION: "Robot is oscillating. Even after executing recovery behaviors.",
+}
+
+
 class Event(enum.Enum):
-    PLANNED = "planned"        # a new global plan (payload: the plan replaced the old one)
-    STUCK = "stuck"            # path blocked, no way past in the local window: publish stuck_feedback
+    PLANNED = "planned"        # a new global plan
+    STUCK = "stuck"            # computeVelocityCommands failed (published only in the thesis's mode)
+    RECOVERY = "recovery"      # a recovery behaviour starts (Step.recovery says which)
     SUCCEEDED = "succeeded"
     ABORTED = "aborted"
 
@@ -47,6 +79,30 @@ class Step:
     angular: float = 0.0
     events: List[Event] = field(default_factory=list)
     reason: str = ""           # why, for ABORTED and STUCK
+    recovery: Optional[Tuple[int, int, str]] = None   # (index, total, name) with RECOVERY
+
+
+@dataclass(frozen=True)
+class RecoveryBehaviour:
+    name: str
+    kind: str                  # "clear" or "rotate"
+    reset_distance: float = 0.0
+    layer_names: Tuple[str, ...] = ()
+
+
+def default_recovery_behaviours(params):
+    """move_base's loadDefaultRecoveryBehaviors."""
+    if not params.recovery_behavior_enabled:
+        return []
+    behaviours = [RecoveryBehaviour("conservative_reset", "clear", params.conservative_reset_dist,
+                                    params.conservative_reset_layer_names)]
+    if params.clearing_rotation_allowed:
+        behaviours.append(RecoveryBehaviour("rotate_recovery", "rotate"))
+    behaviours.append(RecoveryBehaviour("aggressive_reset", "clear", 4.0 * params.robot_extent,
+                                        params.aggressive_reset_layer_names))
+    if params.clearing_rotation_allowed:
+        behaviours.append(RecoveryBehaviour("rotate_recovery", "rotate"))
+    return behaviours
 
 
 def _wrap(angle):
@@ -55,7 +111,8 @@ def _wrap(angle):
 
 class Navigator:
     """One goal at a time, like move_base. ``costmap`` needs ``costs`` (uint8 (size_y, size_x)),
-    ``world_to_cell(x, y)`` and ``cell_to_world(indexes)``."""
+    ``geometry``, ``inflator``, ``world_to_cell(x, y)``, ``cell_to_world(indexes)`` and
+    ``clear_obstacles_outside(x, y, size, layer_names)``."""
 
     def __init__(self, params, costmap, planner=None):
         self.params = params
@@ -68,17 +125,13 @@ class Navigator:
         self.margin_planner = (nav.GridPlanner(lethal_cost=max(1, min(253, margin_cost)),
                                                escape_cells=int(math.ceil(margin_cells)) + 1)
                                if planner is None and margin_cost < 253 else None)
+        self.recovery_behaviours = default_recovery_behaviours(params)
         self.goal = None             # (x, y, yaw)
+        self.state = State.PLANNING
         self.path = np.zeros(0, dtype=np.uint32)
         self.path_xy = np.zeros((0, 2))
         self.progress = 0
-        self.failures = 0
-        self.next_plan = None
-        self.best_remaining = None   # shortest remaining plan length so far (progress check)
-        self.last_progress_time = None
-        self.stuck_count = 0         # stuck reports for the current goal
         self.final_rotation = False
-        self.blockages = []          # (x0, y0, x1, y1, mask): remembered blocked cells, current goal
         self._footprint_edge = None  # footprint outline points (robot frame), for collision checks
         self.last_command = "none"   # what the controller did last, for failure messages
         self.stall_ref = None        # pose since which commands have not moved the robot
@@ -87,6 +140,21 @@ class Navigator:
         self.escapes = 0             # escapes from stalls so far (picks the next kind)
         self.escape_until = None
         self.escape_cmd = None
+        self._reset_state(0.0)
+
+    def _reset_state(self, now):
+        """move_base's resetState plus what a new goal sets."""
+        self.state = State.PLANNING
+        self.recovery_index = 0
+        self.recovery_trigger = RecoveryTrigger.PLANNING
+        self.planning_retries = 0
+        self.last_valid_plan = now
+        self.last_valid_control = now
+        self.last_oscillation_reset = now
+        self.oscillation_pose = None
+        self.next_plan = now
+        self.rotation = None         # a running rotate_recovery: (start yaw, turned so far, last yaw)
+        self.local_failures = 0      # failed computeVelocityCommands for this goal
 
     # --- goals --------------------------------------------------------------------------------
     def set_goal(self, x, y, yaw, now):
@@ -94,21 +162,16 @@ class Navigator:
         self.path = np.zeros(0, dtype=np.uint32)
         self.path_xy = np.zeros((0, 2))
         self.progress = 0
-        self.failures = 0
-        self.stuck_count = 0
-        self.blockages = []
         self.escape_until = None
         self.stall_ref = None
-        self.next_plan = now
-        self.best_remaining = None
-        self.last_progress_time = now
         self.final_rotation = False
+        self._reset_state(now)
 
     def cancel(self):
         self.goal = None
-        self.blockages = []
         self.path = np.zeros(0, dtype=np.uint32)
         self.path_xy = np.zeros((0, 2))
+        self.rotation = None
 
     @property
     def active(self):
@@ -128,7 +191,7 @@ class Navigator:
             return False, "the robot (%.2f, %.2f) is outside the costmap" % (pose[0], pose[1])
         if goal is None:
             return False, "the goal is outside the costmap"
-        status, path = self._make_plan(self.planning_costs(), start, goal)
+        status, path = self._make_plan(self.costmap.costs, start, goal)
         if status != nav.PlanStatus.OK:
             return False, nav.describe(status)
         self._set_path(path)
@@ -141,59 +204,6 @@ class Navigator:
             if status == nav.PlanStatus.OK:
                 return status, path
         return self.planner.make_plan(costs, start, goal, window)
-
-    def planning_costs(self):
-        """The costmap with this goal's remembered blockages set to inscribed (never lowered)."""
-        costs = self.costmap.costs
-        if not self.blockages:
-            return costs
-        costs = costs.copy()
-        for x0, y0, x1, y1, mask in self.blockages:
-            sub = costs[y0:y1, x0:x1]
-            sub[mask & (sub < 253)] = 253
-        return costs
-
-    def _remember_blockage(self, pose, window):
-        """Keeps the blocked cells of the window searched for a way past for the rest of the goal."""
-        cell = self.costmap.world_to_cell(pose[0], pose[1])
-        if cell is None:
-            return
-        x0, y0, x1, y1 = window
-        mask = self.costmap.costs[y0:y1, x0:x1] >= 253
-        mask &= self.costmap.costs[y0:y1, x0:x1] != 255
-        # The robot's own cells stay passable, so it can always plan away from the blockage.
-        r = int(math.ceil(self.params.inscribed_radius * self._cells_per_metre()))
-        cx, cy = cell[0] - x0, cell[1] - y0
-        mask[max(0, cy - r):cy + r + 1, max(0, cx - r):cx + r + 1] = False
-        self.blockages.append((x0, y0, x1, y1, mask))
-
-    def _remaining(self):
-        """Length of the plan from the robot's place on it to the goal, in metres."""
-        pts = self.path_xy[self.progress:]
-        if len(pts) < 2:
-            return 0.0
-        return float(np.hypot(*np.diff(pts, axis=0).T).sum())
-
-    def _remember_plan_ahead(self, pose, metres=1.5):
-        """After a failure to make progress: the plan's next metres (and the cells beside them)
-        stay blocked for planning until the goal ends."""
-        g = self.costmap.geometry
-        pts = self.path_xy[self.progress:]
-        if len(pts) == 0:
-            return
-        d = np.hypot(pts[:, 0] - pose[0], pts[:, 1] - pose[1])
-        clear = self.params.inscribed_radius + g.resolution     # the robot's own cells stay free
-        ahead = pts[(d > clear) & (d <= metres)]
-        if len(ahead) == 0:
-            return
-        cells = np.array([self.costmap.world_to_cell(x, y) for x, y in ahead])
-        x0, y0 = max(0, cells[:, 0].min() - 1), max(0, cells[:, 1].min() - 1)
-        x1, y1 = min(g.size_x, cells[:, 0].max() + 2), min(g.size_y, cells[:, 1].max() + 2)
-        mask = np.zeros((y1 - y0, x1 - x0), dtype=bool)
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                mask[np.clip(cells[:, 1] - y0 + dy, 0, y1 - y0 - 1), np.clip(cells[:, 0] - x0 + dx, 0, x1 - x0 - 1)] = True
-        self.blockages.append((x0, y0, x1, y1, mask))
 
     def _set_path(self, path):
         self.path = path
@@ -233,138 +243,167 @@ class Navigator:
                 return -1
         return blocked
 
-    def _way_past_window(self, pose, blocked_at):
-        """The local window around the blocked cell, grown to contain the robot."""
-        g = self.costmap.geometry
-        start = self.costmap.world_to_cell(pose[0], pose[1])
-        blocked = int(self.path[blocked_at])
-        x0, y0, x1, y1 = self._window((blocked % g.size_x, blocked // g.size_x))
-        return (min(x0, start[0]), min(y0, start[1]), max(x1, start[0] + 1), max(y1, start[1] + 1))
-
-    def _window(self, cell):
-        """The local window (local_window metres square) around a cell, clipped to the map."""
-        g = self.costmap.geometry
-        half = int(self.params.local_window / 2.0 * self._cells_per_metre())
-        return (max(0, cell[0] - half), max(0, cell[1] - half),
-                min(g.size_x, cell[0] + half + 1), min(g.size_y, cell[1] + half + 1))
-
-    def _way_past(self, pose, blocked_at, window):
-        """A path inside the window around the blockage, spliced into the global plan."""
-        flat = self.costmap.costs.reshape(-1)
-        g = self.costmap.geometry
-        start = self.costmap.world_to_cell(pose[0], pose[1])
-        rejoin = None
-        for i in range(blocked_at + 1, len(self.path)):
-            cell = int(self.path[i])
-            x, y = cell % g.size_x, cell // g.size_x
-            if not (window[0] <= x < window[2] and window[1] <= y < window[3]):
-                break
-            if flat[cell] < 253:
-                rejoin = i
-        if rejoin is None:
-            return False
-        status, local = self._make_plan(self.planning_costs(), start, (int(self.path[rejoin]) % g.size_x,
-                                                                           int(self.path[rejoin]) // g.size_x),
-                                               window)
-        if status != nav.PlanStatus.OK:
-            return False
-        spliced = np.concatenate((local, self.path[rejoin + 1:])).astype(np.uint32)
-        self._set_path(spliced)
-        return True
-
-    def _fail(self, step, reason, now):
-        self.failures += 1
-        LOG.warning("failure %d of %d: %s", self.failures, self.params.max_failures, reason)
-        if self.failures >= self.params.max_failures:
-            step.events.append(Event.ABORTED)
-            step.reason = "gave up after %d failures; last: %s" % (self.failures, reason)
-            self.cancel()
-        return step
-
-    # --- control ------------------------------------------------------------------------------
+    # --- move_base's executeCycle -----------------------------------------------------------------
     def tick(self, now, pose):
         """One control cycle; pose = (x, y, yaw) in the costmap frame."""
         step = Step()
         if self.goal is None:
             return step
-        gx, gy, gyaw = self.goal
-        if self.final_rotation or self.distance_to_goal(pose) <= self.params.xy_goal_tolerance:
+        p = self.params
+        # Oscillation bookkeeping, every cycle as in move_base.
+        if self.oscillation_pose is None or math.hypot(pose[0] - self.oscillation_pose[0],
+                                                       pose[1] - self.oscillation_pose[1]) >= p.oscillation_distance:
+            self.last_oscillation_reset = now
+            self.oscillation_pose = pose
+            if self.recovery_trigger is RecoveryTrigger.OSCILLATION:
+                self.recovery_index = 0
+
+        # A CLEARING state set during this cycle is acted on in the next one, as move_base's
+        # planner thread and controller hand it over.
+        clearing = self.state is State.CLEARING
+        if self.state is State.PLANNING or (self.state is State.CONTROLLING and p.planner_frequency > 0
+                                           and now >= self.next_plan):
+            self._planner_cycle(step, now, pose)
+        if self.state is State.CONTROLLING:
+            self._control(step, now, pose)
+        elif clearing:
+            self._clear(step, now, pose)
+        return step
+
+    def _planner_cycle(self, step, now, pose):
+        """move_base's planThread, run in the cycle instead of a thread of its own."""
+        p = self.params
+        if p.planner_frequency > 0:
+            self.next_plan = now + 1.0 / p.planner_frequency
+        ok, reason = self.plan(pose)
+        if ok:
+            self.last_valid_plan = now
+            self.planning_retries = 0
+            step.events.append(Event.PLANNED)
+            if self.recovery_trigger is RecoveryTrigger.PLANNING:
+                self.recovery_index = 0
+            self.state = State.CONTROLLING
+            return
+        if self.state is not State.PLANNING:
+            return                  # a failed periodic replan keeps the plan being followed
+        self.planning_retries += 1
+        out_of_retries = p.max_planning_retries >= 0 and self.planning_retries > p.max_planning_retries
+        if now > self.last_valid_plan + p.planner_patience or out_of_retries:
+            LOG.warning("no global plan for %.1f s (%d retries): %s; clearing", now - self.last_valid_plan,
+                        self.planning_retries, reason)
+            self.state = State.CLEARING
+            self.recovery_trigger = RecoveryTrigger.PLANNING
+
+    def _control(self, step, now, pose):
+        p = self.params
+        # The goal reached: base_local_planner's isGoalReached (position, then heading in place).
+        if self.final_rotation or self.distance_to_goal(pose) <= p.xy_goal_tolerance:
             self.final_rotation = True
-            err = _wrap(gyaw - pose[2])
-            if abs(err) <= self.params.yaw_goal_tolerance:
+            err = _wrap(self.goal[2] - pose[2])
+            if abs(err) <= p.yaw_goal_tolerance:
                 step.events.append(Event.SUCCEEDED)
                 self.cancel()
-                return step
-            step.angular = math.copysign(max(0.3, min(self.params.max_rotational_vel, 1.5 * abs(err))), err)
-            return step
-
-        # The path ahead is checked before any periodic replan, so a blockage the robot runs into is
-        # always reported as a failure, never silently planned around. When a replan is due the
-        # check reaches as far as the robot's own marks can (half the local window), otherwise a
-        # block seen 2-2.5 m ahead would be a silent replan or a stuck depending on timing.
-        if len(self.path):
-            self._update_progress(pose)
-        replan_due = self.next_plan is not None and now >= self.next_plan
-        reach = self.params.blocked_lookahead
-        if replan_due:
-            reach = max(reach, self.params.local_window / 2.0 - self.costmap.geometry.resolution)
-        blocked = self._blocked_at(pose, reach) if len(self.path) else -1
-        window = self._way_past_window(pose, blocked) if blocked >= 0 else None
-        if blocked >= 0 and not self._way_past(pose, blocked, window):
-            self.stuck_count += 1
+                return
+            step.angular = math.copysign(max(0.3, min(p.max_rotational_vel, 1.5 * abs(err))), err)
+            self.last_valid_control = now
+            return
+        if p.oscillation_timeout > 0 and now > self.last_oscillation_reset + p.oscillation_timeout:
+            LOG.warning("no move of %.2f m for %.1f s at (%.2f, %.2f); clearing", p.oscillation_distance,
+                        p.oscillation_timeout, pose[0], pose[1])
+            self.state = State.CLEARING
+            self.recovery_trigger = RecoveryTrigger.OSCILLATION
+            return
+        command, failure = self._compute_velocity(now, pose)
+        if command is not None:
+            step.linear, step.angular = command
+            self.last_valid_control = now
+            if self.recovery_trigger is RecoveryTrigger.CONTROLLING:
+                self.recovery_index = 0
+            self._watch_motion(now, pose, step.linear, step.angular)
+            return
+        self.local_failures += 1
+        if p.stuck_feedback_on_local_failure:
             step.events.append(Event.STUCK)
-            bx, by = self.path_xy[blocked]
-            step.reason = ("path blocked at (%.2f, %.2f), %.2f m ahead, and no way past within the %.1f m "
-                           "local window" % (bx, by, math.hypot(bx - pose[0], by - pose[1]),
-                                             self.params.local_window))
-            self._remember_blockage(pose, window)
-            self.best_remaining = None
-            self.path = np.zeros(0, dtype=np.uint32)
-            self.path_xy = np.zeros((0, 2))
-            self.next_plan = now      # replan at once on the next tick
-            self.last_progress_time = now
-            return self._fail(step, step.reason, now)
+            step.reason = failure
+        if now > self.last_valid_control + p.controller_patience:
+            LOG.warning("no valid control for %.1f s: %s; clearing", now - self.last_valid_control, failure)
+            self.state = State.CLEARING
+            self.recovery_trigger = RecoveryTrigger.CONTROLLING
+        else:
+            LOG.info("the local controller failed (%s); replanning", failure)
+            self.last_valid_plan = now
+            self.planning_retries = 0
+            self.state = State.PLANNING
 
-        if self.next_plan is not None and now >= self.next_plan:
-            ok, reason = self.plan(pose)
-            period = 1.0 / self.params.planner_frequency if self.params.planner_frequency > 0 else None
-            if not ok:
-                self.path = np.zeros(0, dtype=np.uint32)
-                self.path_xy = np.zeros((0, 2))
-                # Retry after a planner period (1 s when planning only on demand).
-                self.next_plan = now + (period or 1.0)
-                return self._fail(step, "no global plan: %s" % reason, now)
-            step.events.append(Event.PLANNED)
-            self.next_plan = now + period if period else None
+    def _compute_velocity(self, now, pose):
+        """computeVelocityCommands: (command, None), or (None, why it failed)."""
         if len(self.path) == 0:
-            return step
+            return None, "no plan to follow"
+        self._update_progress(pose)
+        blocked = self._blocked_at(pose, self.params.blocked_lookahead)
+        if blocked >= 0:
+            bx, by = self.path_xy[blocked]
+            return None, ("the plan is blocked at (%.2f, %.2f), %.2f m ahead" % (bx, by, math.hypot(bx - pose[0],
+                                                                                                      by - pose[1])))
+        command = self._escape(now, pose) or self._follow(pose)
+        if command is None:
+            return None, self.last_command
+        return command, None
 
-        # No progress for stuck_timeout seconds: the plan's remaining length did not shrink (pushing
-        # against something unseen, or going back and forth in front of a gap the footprint does
-        # not pass). The plan ahead is then remembered as blocked, so the replan takes another way.
-        remaining = self._remaining()
-        if self.best_remaining is None or remaining < self.best_remaining - 0.1:
-            self.best_remaining = remaining
-            self.last_progress_time = now
-        elif now - self.last_progress_time > self.params.stuck_timeout:
-            self.last_progress_time = now
-            self.best_remaining = None
-            reason = ("no progress for %.1f s at (%.2f, %.2f), %.1f m of plan left; last command %s"
-                      % (self.params.stuck_timeout, pose[0], pose[1], remaining, self.last_command))
-            self._remember_plan_ahead(pose)
-            self.path = np.zeros(0, dtype=np.uint32)
-            self.path_xy = np.zeros((0, 2))
-            self.next_plan = now
-            return self._fail(step, reason, now)
-        elif remaining > self.best_remaining + 1.0 and now - self.last_progress_time < self.params.stuck_timeout / 4:
-            # A replan onto a longer route while the robot was making progress (a shared obstacle
-            # arrived) starts the count again; after a while without progress it is no excuse.
-            self.best_remaining = remaining
-            self.last_progress_time = now
+    def _clear(self, step, now, pose):
+        """The CLEARING state: one recovery behaviour, then PLANNING; or abort."""
+        if self.rotation is not None:
+            if self._rotate(step, pose):
+                return
+            self._recovered(now)
+            return
+        if self.recovery_index >= len(self.recovery_behaviours):
+            step.events.append(Event.ABORTED)
+            step.reason = ABORT_TEXT[self.recovery_trigger]
+            LOG.error("aborting: %s (trigger %s)", step.reason, self.recovery_trigger.value)
+            self.cancel()
+            return
+        behaviour = self.recovery_behaviours[self.recovery_index]
+        step.events.append(Event.RECOVERY)
+        step.recovery = (self.recovery_index, len(self.recovery_behaviours), behaviour.name)
+        LOG.info("recovery behaviour %d of %d: %s (trigger %s)", self.recovery_index + 1,
+                 len(self.recovery_behaviours), behaviour.name, self.recovery_trigger.value)
+        if behaviour.kind == "clear":
+            cleared = self.costmap.clear_obstacles_outside(pose[0], pose[1], behaviour.reset_distance,
+                                                           behaviour.layer_names)
+            LOG.info("%s: %d obstacle cells cleared outside %.2f m x %.2f m around (%.2f, %.2f)", behaviour.name,
+                     cleared, behaviour.reset_distance, behaviour.reset_distance, pose[0], pose[1])
+            self._recovered(now)
+        else:
+            self.rotation = (pose[2], 0.0, pose[2])
+            if not self._rotate(step, pose):
+                self._recovered(now)
 
-        step.linear, step.angular = self._escape(now, pose) or self._follow(pose)
-        self._watch_motion(now, pose, step.linear, step.angular)
-        return step
+    def _recovered(self, now):
+        """After a recovery behaviour, as move_base: plan again and start the timers afresh."""
+        self.rotation = None
+        self.last_valid_plan = now
+        self.last_oscillation_reset = now
+        self.planning_retries = 0
+        self.recovery_index += 1
+        self.state = State.PLANNING
+
+    def _rotate(self, step, pose):
+        """rotate_recovery: a full turn in place; False when done or when turning would collide."""
+        start, turned, last = self.rotation
+        turned += abs(_wrap(pose[2] - last))
+        self.rotation = (start, turned, pose[2])
+        left = 2.0 * math.pi - turned
+        if left <= self.params.yaw_goal_tolerance:
+            return False
+        p = self.params
+        speed = min(p.max_rotational_vel, max(p.min_in_place_rotational_vel, math.sqrt(2.0 * p.acc_lim_th * left)))
+        if self._collides(pose, 0.0, speed):
+            LOG.warning("rotate_recovery stops after %.0f deg: turning further would touch an obstacle",
+                        math.degrees(turned))
+            return False
+        step.linear, step.angular = 0.0, speed
+        return True
 
     # Escapes, tried in turn on successive stalls: (linear, angular sign relative to the stalled turn).
     ESCAPES = (("turn the other way", 0.0, -1.0), ("creep forward", 0.15, 0.0), ("reverse", None, 0.0))
@@ -395,7 +434,6 @@ class Navigator:
             return None
         if now >= self.escape_until:
             self.escape_until = None
-            self.next_plan = now
             self.stall_ref = None
             return None
         kind, lin, ang = self.escape_cmd
@@ -405,7 +443,8 @@ class Navigator:
         return lin, ang
 
     def _follow(self, pose):
-        """Pure pursuit towards the path point lookahead metres ahead; turn in place when far off.
+        """Pure pursuit towards the path point lookahead metres ahead; turn in place when far off;
+        None when every command would touch an obstacle.
 
         Pure pursuit cuts corners, and the path only keeps the robot's centre off inscribed cells:
         each command is checked by rolling the footprint forward ``collision_horizon`` seconds on
@@ -449,8 +488,8 @@ class Navigator:
             if cand_v == 0.0 or not self._collides(pose, cand_v, cand_w):
                 self.last_command = "%s (%.2f m/s, %.2f rad/s)" % (kind, cand_v, cand_w)
                 return cand_v, cand_w
-        self.last_command = "stop: following (%.2f, %.2f), turning and reversing would all touch an obstacle" % (v, w)
-        return 0.0, 0.0
+        self.last_command = "no command: following (%.2f, %.2f), turning and reversing would all touch an obstacle" % (v, w)
+        return None
 
     def _collides(self, pose, v, w):
         """Whether the footprint, driven at (v, w) for collision_horizon seconds, meets a lethal cell."""

@@ -1,10 +1,12 @@
 """rospy adapter of fleet_nav (``rosrun fleet_nav fleet_nav`` in a robot namespace).
 
 Reads move_base/costmap_2d parameters (see params.py), waits for /map, then runs the global
-costmap (static + sharing layer + inflation), the global planner and the path follower at
+costmap (static + sharing layer + inflation) and move_base's state machine (navigator.py) at
 controller_frequency. Interfaces (relative to the robot namespace): base_scan in, cmd_vel out,
-move_base action + move_base_simple/goal, stuck_feedback out (once per failure) and in (like the
-costmap_2d plugin, with move_base/recovery_status), global_costmap/costmap, plan (and
+move_base action + move_base_simple/goal, ~recovery_status out (move_base's RecoveryStatus, one per
+recovery behaviour), stuck_feedback out only with stuck_feedback_on_local_failure (the thesis's
+modified move_base), stuck_feedback and move_base/recovery_status in (the sharing layer's
+triggers, as in the costmap_2d plugin), global_costmap/costmap, plan (and
 move_base/NavfnROS/plan), shared_obstacle_markers, obstacle_proposals / obstacle_updates out,
 shared_obstacles / expired_obstacles in. Service ~snapshot (fleet_sim/Snapshot) writes a PNG of
 this robot's view.
@@ -19,7 +21,7 @@ import numpy as np
 import rospy
 import tf2_ros
 from geometry_msgs.msg import PoseStamped, Twist
-from move_base_msgs.msg import MoveBaseAction, MoveBaseFeedback, MoveBaseResult
+from move_base_msgs.msg import MoveBaseAction, MoveBaseFeedback, MoveBaseResult, RecoveryStatus
 from nav_msgs.msg import OccupancyGrid, Path
 from sharing_msgs.msg import SharedObstacle
 from std_msgs.msg import Empty, String
@@ -111,6 +113,8 @@ class NavNode:
 
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
         self.stuck_pub = rospy.Publisher("stuck_feedback", Empty, queue_size=10)
+        # move_base announces each recovery behaviour on ~recovery_status (its private namespace).
+        self.recovery_pub = rospy.Publisher("~recovery_status", RecoveryStatus, queue_size=10)
         self.costmap_pub = rospy.Publisher("global_costmap/costmap", OccupancyGrid, queue_size=1, latch=True)
         self.plan_pub = rospy.Publisher("plan", Path, queue_size=1, latch=True)
         self.navfn_plan_pub = rospy.Publisher("move_base/NavfnROS/plan", Path, queue_size=1, latch=True)
@@ -148,6 +152,7 @@ class NavNode:
         rospy.Subscriber("shared_obstacles", SharedObstacle, self._on_shared, queue_size=100)
         rospy.Subscriber("expired_obstacles", String, self._on_expired, queue_size=100)
         rospy.Subscriber("stuck_feedback", Empty, self._on_external_stuck, queue_size=10)
+        # Like the costmap_2d plugin: a recovery announced by this host or by a move_base beside it.
         rospy.Subscriber("move_base/recovery_status", rospy.AnyMsg, self._on_external_stuck, queue_size=10)
         rospy.Subscriber("move_base_simple/goal", PoseStamped, self._on_simple_goal, queue_size=1)
         self.server = actionlib.SimpleActionServer("move_base", MoveBaseAction, auto_start=False)
@@ -409,17 +414,34 @@ class NavNode:
                 self.server.publish_feedback(fb)
             rate.sleep()
 
+    def _publish_recovery_status(self, index, total, name):
+        msg = RecoveryStatus()
+        msg.pose_stamped.header.frame_id = self.params.global_frame
+        msg.pose_stamped.header.stamp = rospy.Time.now()
+        if self.pose is not None:
+            msg.pose_stamped.pose.position.x, msg.pose_stamped.pose.position.y = self.pose[0], self.pose[1]
+            o = msg.pose_stamped.pose.orientation
+            o.x, o.y, o.z, o.w = yaw_quaternion(self.pose[2])
+        msg.current_recovery_number = index
+        msg.total_number_of_recoveries = total
+        msg.recovery_behavior_name = name
+        rospy.logwarn("fleet_nav (%s): recovery behaviour %d of %d: %s", self.robot, index + 1, total, name)
+        self.recovery_pub.publish(msg)
+
     def _handle(self, step):
         for event in step.events:
             if event is Event.PLANNED:
                 self._publish_plan()
             elif event is Event.STUCK:
-                rospy.logwarn("fleet_nav (%s): stuck (%d for this goal): %s; publishing stuck_feedback and replanning",
-                              self.robot, self.navigator.stuck_count, step.reason)
+                rospy.logwarn("fleet_nav (%s): local controller failed (%d for this goal): %s; publishing "
+                              "stuck_feedback (stuck_feedback_on_local_failure)", self.robot,
+                              self.navigator.local_failures, step.reason)
                 self.stuck_pub.publish(Empty())
                 with self.lock:
                     if self.stuck_pending is None:
                         self.stuck_pending = rospy.get_time()
+            elif event is Event.RECOVERY:
+                self._publish_recovery_status(*step.recovery)
             elif event is Event.SUCCEEDED:
                 with self.lock:
                     self.costmap.reset_obstacle_layer()

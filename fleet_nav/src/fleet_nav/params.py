@@ -96,23 +96,38 @@ class NavParams:
     footprint: Tuple[Tuple[float, float], ...] = ()
     robot_radius: float = 0.46
     update_frequency: float = 5.0
-    planner_frequency: float = 0.5
-    controller_frequency: float = 10.0
+    # move_base's own parameters, with move_base's defaults
+    planner_frequency: float = 0.0
+    controller_frequency: float = 20.0
+    planner_patience: float = 5.0
+    controller_patience: float = 15.0
+    max_planning_retries: int = -1
+    oscillation_timeout: float = 0.0
+    oscillation_distance: float = 0.5
+    recovery_behavior_enabled: bool = True
+    clearing_rotation_allowed: bool = True
+    conservative_reset_dist: float = 3.0
+    conservative_reset_layer_names: Tuple[str, ...] = ("obstacle_layer",)
+    aggressive_reset_layer_names: Tuple[str, ...] = ("obstacle_layer",)
+    # the thesis's modified move_base: stuck_feedback when computeVelocityCommands fails
+    stuck_feedback_on_local_failure: bool = False
     lethal_cost_threshold: int = 100
     track_unknown_space: bool = False
+    # base_local_planner's (TrajectoryPlannerROS) parameters, with its defaults
     max_vel_x: float = 0.5
     max_rotational_vel: float = 1.0
-    xy_goal_tolerance: float = 0.2
-    yaw_goal_tolerance: float = 0.2
+    min_in_place_rotational_vel: float = 0.4
+    acc_lim_th: float = 3.2
+    sim_time: float = 1.0
+    xy_goal_tolerance: float = 0.1
+    yaw_goal_tolerance: float = 0.05
+    escape_vel: float = -0.1
+    # fleet_nav's own controller (a stand-in for base_local_planner)
     lookahead: float = 0.6
-    local_window: float = 6.0
-    blocked_lookahead: float = 2.0
+    blocked_lookahead: float = 0.0   # 0: the local planner's reach, sim_time x max_vel_x
     clearance_margin: float = 0.1
     collision_horizon: float = 0.5
-    escape_vel: float = -0.1
     stall_time: float = 1.5
-    stuck_timeout: float = 20.0
-    max_failures: int = 5
     sharing_enabled: bool = True
     sharing: Dict[str, object] = field(default_factory=dict)
     map_wait_log_period: float = 5.0
@@ -123,26 +138,26 @@ class NavParams:
                      "max_obstacle_height", "clearance_margin"):
             _number(name, getattr(self, name), low=0.0)
         for name in ("update_frequency", "controller_frequency", "max_vel_x", "max_rotational_vel",
-                     "lookahead", "local_window", "blocked_lookahead", "stuck_timeout", "map_wait_log_period",
-                     "collision_horizon", "stall_time"):
+                     "lookahead", "map_wait_log_period", "collision_horizon", "stall_time", "sim_time",
+                     "acc_lim_th", "min_in_place_rotational_vel"):
             _number(name, getattr(self, name), low=0.0, low_open=True)
+        for name in ("planner_patience", "controller_patience", "oscillation_timeout", "oscillation_distance",
+                     "conservative_reset_dist", "blocked_lookahead"):
+            _number(name, getattr(self, name), low=0.0)
+        if self.blocked_lookahead == 0.0:
+            object.__setattr__(self, "blocked_lookahead", self.sim_time * self.max_vel_x)
+        if (not isinstance(self.max_planning_retries, int) or isinstance(self.max_planning_retries, bool)
+                or self.max_planning_retries < -1):
+            raise ParameterError("parameter max_planning_retries must be an integer >= -1 (-1: no limit), got %r"
+                                 % (self.max_planning_retries,))
         if self.planner_frequency > 0 and not 0.05 <= self.planner_frequency <= 50:
             raise ParameterError("parameter planner_frequency must be 0 (plan on new goals only) or "
                                  "0.05..50 Hz, got %r" % self.planner_frequency)
-        if not isinstance(self.max_failures, int) or isinstance(self.max_failures, bool) or self.max_failures < 1:
-            raise ParameterError("parameter max_failures must be an integer >= 1, got %r" % (self.max_failures,))
         if not 1 <= self.lethal_cost_threshold <= 100:
             raise ParameterError("parameter lethal_cost_threshold must be 1..100, got %r"
                                  % self.lethal_cost_threshold)
         if self.footprint and len(self.footprint) < 3:
             raise ParameterError("parameter footprint needs at least 3 points, got %r" % (self.footprint,))
-        if self.local_window < 2 * self.robot_extent:
-            raise ParameterError("parameter local_window (%r m) must be at least the robot's width (%r m)"
-                                 % (self.local_window, 2 * self.robot_extent))
-        if self.local_window / 2.0 <= self.blocked_lookahead:
-            raise ParameterError("parameter local_window (%r m) must be more than twice blocked_lookahead (%r m), "
-                                 "so that a way past a blockage can be searched beyond it"
-                                 % (self.local_window, self.blocked_lookahead))
 
     @property
     def inscribed_radius(self):
@@ -237,26 +252,32 @@ class NavParams:
         values["robot_radius"] = _number(radius_key, radius_value, low=0.0, low_open=True) + padding
         if footprint_value is not None:
             values["footprint"] = pad_footprint(parse_footprint(footprint_key, footprint_value), padding)
-        num("planner_frequency", take(["planner_frequency"], 0.5))
-        num("controller_frequency", take(["controller_frequency"], 10.0))
-        num("max_vel_x", local("max_vel_x", 0.5))
-        num("max_rotational_vel", local("max_rotational_vel", 1.0, aliases=("max_rot_vel",)))
-        num("xy_goal_tolerance", local("xy_goal_tolerance", 0.2))
+        for name in ("planner_frequency", "controller_frequency", "planner_patience", "controller_patience",
+                     "oscillation_timeout", "oscillation_distance", "conservative_reset_dist"):
+            num(name, take([name], getattr(cls, name)))
+        num("max_planning_retries", take(["max_planning_retries"], -1), integer=True)
+        for name in ("recovery_behavior_enabled", "clearing_rotation_allowed", "stuck_feedback_on_local_failure"):
+            flag(name, take([name], getattr(cls, name)))
+        for name in ("conservative_reset", "aggressive_reset"):
+            layers, key = take([name + "/layer_names"], None)
+            if layers is not None:
+                if not isinstance(layers, (list, tuple)) or not all(isinstance(x, str) and x for x in layers):
+                    raise ParameterError("parameter %s must be a list of layer names, got %r" % (key, layers))
+                values[name + "_layer_names"] = tuple(layers)
+        num("max_vel_x", local("max_vel_x", cls.max_vel_x))
+        num("max_rotational_vel", local("max_rotational_vel", cls.max_rotational_vel, aliases=("max_rot_vel",)))
+        num("min_in_place_rotational_vel", local("min_in_place_rotational_vel", cls.min_in_place_rotational_vel,
+                                                 aliases=("min_in_place_vel_theta",)))
+        num("acc_lim_th", local("acc_lim_th", cls.acc_lim_th, aliases=("acc_lim_theta",)))
+        num("sim_time", local("sim_time", cls.sim_time))
+        num("xy_goal_tolerance", local("xy_goal_tolerance", cls.xy_goal_tolerance))
         num("escape_vel", local("escape_vel", -0.1))
         if values["escape_vel"] > 0:
             raise ParameterError("parameter escape_vel must be <= 0 (a reverse speed), got %r" % values["escape_vel"])
-        num("yaw_goal_tolerance", local("yaw_goal_tolerance", 0.2))
+        num("yaw_goal_tolerance", local("yaw_goal_tolerance", cls.yaw_goal_tolerance))
         for name in ("lookahead", "blocked_lookahead", "clearance_margin", "collision_horizon", "stall_time",
-                     "stuck_timeout", "map_wait_log_period"):
+                     "map_wait_log_period"):
             num(name, take([name], getattr(cls, name)))
-        # The way past a blockage is searched where move_base's local planner would look: the local
-        # costmap's rolling window (the tutorials' 6 m x 6 m), unless ~local_window says otherwise.
-        width, width_key = take(["local_costmap/width"], None)
-        height, height_key = take(["local_costmap/height"], None)
-        window = [_number(k, v, low=0.0, low_open=True) for v, k in ((width, width_key), (height, height_key))
-                  if v is not None]
-        num("local_window", take(["local_window"], min(window) if window else cls.local_window))
-        num("max_failures", take(["max_failures"], 5), integer=True)
         flag("sharing_enabled", take(["sharing_enabled"], True))
         sharing = {}
         for key in SHARING_KEYS:
