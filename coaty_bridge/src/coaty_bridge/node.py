@@ -12,6 +12,7 @@ import threading
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.codec import ObstacleUpdate
@@ -115,7 +116,11 @@ class BridgeNode:
         self.config = config
         self._lock = threading.Lock()
         self._counters = {}
-        self.from_fleet = rospy.Publisher("from_fleet", SharedObstacle, queue_size=100)
+        self._delivery_errors_reported = 0
+        # A message that cannot be delivered is dropped there; the publisher stays usable.
+        self.from_fleet = SafePublisher(
+            lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
+            topic="%s/from_fleet" % config.robot_name)
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle)
         rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
@@ -147,7 +152,15 @@ class BridgeNode:
             self._counters[key] = self._counters.get(key, 0) + 1
 
     def _on_fleet_obstacle(self, update, topic):
-        self.from_fleet.publish(update_to_msg(update))
+        what = "%s: obstacle %s v%d from %s (sourceId %s)" % (
+            self.config.robot_name, update.uuid, update.version, update.source, topic.source_id)
+        try:
+            msg = update_to_msg(update)
+        except Exception as err:  # noqa: BLE001 - one bad value must not stop delivery
+            self._count("delivery_error.conversion")
+            rospy.logerr("conversion: dropped %s: %s: %s", what, type(err).__name__, err)
+            return
+        self.from_fleet.publish(msg, what)
 
     def _on_to_fleet(self, msg):
         try:
@@ -169,6 +182,10 @@ class BridgeNode:
     def _on_obstacle_list(self, msg):
         updates = []
         for item in msg.obstacles:
+            if not item.marked_indexes:
+                # An obstacle emptied by raytracing draws nothing on a late joiner; a fleet
+                # message without cells is refused by every receiver anyway.
+                continue
             try:
                 updates.append(msg_to_update(item))
             except ValueError as err:
@@ -184,7 +201,23 @@ class BridgeNode:
         status = DiagnosticStatus()
         status.name = "coaty_bridge: %s" % self.config.robot_name
         status.hardware_id = self.client.identity_id
-        if self.client.connected:
+        delivery = dict(("delivery_error." + reason, n) for reason, n in self.from_fleet.errors.items())
+        delivery.update((k, v) for k, v in counters.items() if k.startswith("delivery_error."))
+        counters.update(delivery)
+        counters["delivered"] = self.from_fleet.delivered
+        counters["publishers_recreated"] = self.from_fleet.recreated
+        failed = sum(delivery.values())
+        new_failures, self._delivery_errors_reported = failed - self._delivery_errors_reported, failed
+        if self.from_fleet.consecutive_errors >= 3:
+            # several in a row and none through since: delivery to the handler looks broken
+            status.level = DiagnosticStatus.ERROR
+            status.message = "%d deliveries to from_fleet failed in a row (%s)" % (
+                self.from_fleet.consecutive_errors, _reasons(delivery))
+        elif new_failures:
+            status.level = DiagnosticStatus.WARN
+            status.message = "%d messages could not be delivered to from_fleet since the last report (%s)" % (
+                new_failures, _reasons(delivery))
+        elif self.client.connected:
             status.level = DiagnosticStatus.OK
             status.message = "connected to %s" % self.config.broker_url
         else:
@@ -197,13 +230,18 @@ class BridgeNode:
         self.diagnostics.publish(array)
 
 
+def _reasons(counts):
+    return ", ".join("%s %d" % (k.split(".", 1)[1], v) for k, v in sorted(counts.items()) if v)
+
+
 def main():
     rospy.init_node("coaty_bridge")
     handler = RosoutHandler()
     handler.setFormatter(logging.Formatter("%(message)s"))
-    package_logger = logging.getLogger("coaty_bridge")
-    package_logger.addHandler(handler)
-    package_logger.setLevel(logging.INFO)
+    for name in ("coaty_bridge", "sharing_msgs"):
+        package_logger = logging.getLogger(name)
+        package_logger.addHandler(handler)
+        package_logger.setLevel(logging.INFO)
     try:
         config = read_config()
         subscriber_wait = rospy.get_param("~subscriber_wait", 10.0)
