@@ -19,8 +19,9 @@ from dataclasses import dataclass
 from typing import Tuple
 
 from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
-from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_indexes,
-                                           check_uuid)
+from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
+                                           check_indexes, check_message_values, check_uuid)
+from sharing_msgs import obstacle_rules
 
 _log = logging.getLogger(__name__)
 
@@ -40,6 +41,9 @@ DROP_REASONS = (
     "expired",              # a message for an obstacle that expired here (tombstone)
     "unknown_uuid",         # an internal update for an obstacle the handler does not hold
     "empty_proposal",       # a proposal without marked cells
+    "bad_stamp",            # a header stamp outside the ROS time range (or not finite)
+    "rectangle_outside_grid",  # a rectangle reaching beyond the grid it names
+    "empty_update",         # a fleet message without any marked or cleared cell
 )
 
 #: Counters besides the drops.
@@ -164,7 +168,7 @@ class SharingHandler:
 
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
-                 max_deferred=10000):
+                 max_deferred=10000, max_obstacle_extent=10.0):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -183,6 +187,7 @@ class SharingHandler:
         self._max_cells = max_cells_per_message
         self._new_uuid = uuid_factory or (lambda: str(uuidlib.uuid4()))
         self._max_deferred = max_deferred
+        self._max_extent = max_obstacle_extent
         self._entries = {}      # uuid -> _Entry
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
         self._deferred = []     # fleet messages waiting for a grid
@@ -241,6 +246,7 @@ class SharingHandler:
                 raise InvalidMessageError("malformed", "proposal already has uuid %r" % obstacle.uuid)
             if not obstacle.marked:
                 raise InvalidMessageError("empty_proposal", "no marked cells in %s" % obstacle.rectangle)
+            check_message_values(obstacle)
             if self._geometry is None:
                 _log.info("%s: no map yet; taking the grid of the first proposal: %s",
                           self.robot_name, obstacle.geometry)
@@ -270,11 +276,17 @@ class SharingHandler:
                                           "handler does not hold" % obstacle.uuid)
             if self._geometry is None:
                 raise InvalidMessageError("no_geometry", "no grid known yet")
+            check_message_values(obstacle)
             self._check_grid(obstacle)
+            if obstacle.version <= entry.max_version and entry.max_version >= obstacle_rules.MAX_VERSION:
+                raise InvalidMessageError("bad_version", "obstacle %s is at the last version %d"
+                                          % (obstacle.uuid, entry.max_version))
         except InvalidMessageError as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
         changes = {}
+        if not obstacle.stamp:
+            changes["stamp"] = self._clock()
         if obstacle.version <= entry.max_version:
             changes["version"] = entry.max_version + 1
             self._counters["restamped"] += 1
@@ -292,6 +304,12 @@ class SharingHandler:
             changes["deadline"] = entry.deadline
         if changes:
             obstacle = obstacle.replace(**changes)
+        try:
+            # What goes out must pass the fleet check on every receiver (the same rules).
+            check_fleet_message(obstacle)
+        except InvalidMessageError as err:
+            self.reject(self.robot_name, obstacle.uuid, err)
+            return None
         self._to_fleet(obstacle)
         self._counters["updates_out"] += 1
         if entry.apply(obstacle):
@@ -344,12 +362,25 @@ class SharingHandler:
         try:
             if not isinstance(rectangle, Rectangle):
                 rectangle = Rectangle.from_sequence(rectangle)
+            if isinstance(deadline, bool) or not isinstance(deadline, int) \
+                    or not 0 <= deadline <= obstacle_rules.MAX_UINT32:
+                raise InvalidRequestError("deadline %r is not 0..%d s" % (deadline, obstacle_rules.MAX_UINT32))
+            obstacle = Obstacle(uuid="", marked=(), cleared=(), deadline=0, rectangle=rectangle,
+                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id,
+                                stamp=self._clock())
+            check_message_values(obstacle)  # the rectangle lies on the grid, the stamp is ROS time
+            width, height = rectangle.max_x - rectangle.min_x, rectangle.max_y - rectangle.min_y
+            if max(width, height) > self._max_extent:
+                # An obstacle blocks a pathway; a huge rectangle would make every later
+                # proposal under it redundant on every robot.
+                raise InvalidRequestError("rectangle %s is %g m x %g m, larger than max_obstacle_extent "
+                                          "%g m" % (rectangle, width, height, self._max_extent))
             marked = tuple(int(c) for c in marked) or self._geometry.cells_in(rectangle)
             if not marked:
                 raise InvalidRequestError("rectangle %s covers no cell of the map (%s)"
                                           % (rectangle, self._geometry))
-            obstacle = Obstacle(uuid="", marked=marked, cleared=(), deadline=0, rectangle=rectangle,
-                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id)
+            obstacle = obstacle.replace(marked=marked)
+            check_message_values(obstacle)
             check_indexes(obstacle, self._geometry, self._max_cells)
         except InvalidMessageError as err:
             raise InvalidRequestError(str(err)) from err
@@ -390,8 +421,9 @@ class SharingHandler:
     # ----------------------------------------------------------------- internals
 
     def _authorise(self, obstacle, deadline):
+        # stamp = when the share was made: the layer's detection time, or now (manual adds).
         shared = obstacle.replace(uuid=self._new_uuid(), version=1, source=self.robot_name,
-                                  deadline=deadline)
+                                  deadline=deadline, stamp=obstacle.stamp or self._clock())
         entry = _Entry(shared, self._clock())
         self._entries[shared.uuid] = entry
         entry.apply(shared)
@@ -411,15 +443,10 @@ class SharingHandler:
         return None
 
     def _check_external(self, obstacle):
-        if not obstacle.source:
-            raise InvalidMessageError("malformed", "empty source")
+        # The same rules the bridge applies to what arrives over MQTT (neither is looser).
+        check_fleet_message(obstacle)
         if obstacle.source == self.robot_name:
             raise InvalidMessageError("own_source", "message claims to come from this robot")
-        check_uuid(obstacle.uuid)
-        if obstacle.version == 0:
-            raise InvalidMessageError("bad_version", "version 0 (a proposal) on the fleet channel")
-        if obstacle.deadline == 0:
-            raise InvalidMessageError("zero_deadline", "deadline 0")
         if obstacle.uuid in self._tombstones:
             raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
 
