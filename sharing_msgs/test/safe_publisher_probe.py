@@ -2,7 +2,8 @@
 """Child process of test_safe_publisher.py (not a test itself): publishes SharedObstacles with
 header stamps 100, 2**32 (cannot be serialised) and 300 s to its own subscriber, and prints the
 stamps that arrived as one JSON line. ``--raw`` uses a plain rospy.Publisher instead of a
-SafePublisher (and swallows its exception), showing the failure SafePublisher prevents."""
+SafePublisher (and swallows its exception), showing the failure SafePublisher prevents;
+``--no-precheck`` lets the bad message reach rospy, exercising SafePublisher's repair."""
 import json
 import sys
 import time
@@ -18,7 +19,8 @@ def main():
     received = []
     rospy.Subscriber("probe_topic", SharedObstacle, lambda m: received.append(m.header.stamp.secs))
     make = lambda: rospy.Publisher("probe_topic", SharedObstacle, queue_size=10)  # noqa: E731
-    publisher = make() if raw else SafePublisher(make, topic="probe_topic")
+    publisher = make() if raw else SafePublisher(make, topic="probe_topic",
+                                                 precheck="--no-precheck" not in sys.argv)
     deadline = time.monotonic() + 10
     while publisher.get_num_connections() == 0 and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -36,7 +38,8 @@ def main():
         time.sleep(0.05)
     time.sleep(0.3)  # anything else that was going to arrive
     print(json.dumps({"received": received, "errors": errors,
-                      "counted": getattr(publisher, "errors", None)}), flush=True)
+                      "counted": getattr(publisher, "errors", None),
+                      "repaired": getattr(publisher, "repaired", None)}), flush=True)
     rospy.signal_shutdown("done")
 
 

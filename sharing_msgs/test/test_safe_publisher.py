@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from sharing_msgs.safe_publisher import PUBLISH_FAILED, SERIALIZATION, SafePublisher
+from sharing_msgs.safe_publisher import ERROR, OK, PUBLISH_FAILED, SERIALIZATION, WARN, SafePublisher
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -27,6 +27,8 @@ class FakeMsg:
 
 
 class FakePublisher:
+    """Has no rospy ``impl.buff``: a failed publish makes SafePublisher replace it."""
+
     def __init__(self, fail_times=0):
         self.sent, self.fail_times, self.unregistered = [], fail_times, False
 
@@ -63,6 +65,22 @@ def test_a_publisher_that_failed_is_replaced_and_the_next_message_gets_through()
     assert safe.consecutive_errors == 1 and safe.errors == {PUBLISH_FAILED: 1}
     assert safe.publish(FakeMsg("next"))
     assert len(made) == 2 and made[0].unregistered and made[1].sent == ["next"] and safe.recreated == 1
+
+
+def test_report_warns_on_new_drops_and_errors_while_every_delivery_fails():
+    safe = SafePublisher(FakePublisher, topic="robot_0/from_fleet")
+    assert safe.report()[0] == OK
+    safe.publish(FakeMsg("bad", serialisable=False))
+    level, message, counts = safe.report()
+    assert level == WARN and "1 messages dropped" in message and counts == {SERIALIZATION: 1}
+    assert safe.report()[0] == OK  # nothing new since
+    for _ in range(3):
+        safe.publish(FakeMsg("bad", serialisable=False))
+    level, message, counts = safe.report()
+    assert level == ERROR and "last 4 deliveries failed" in message and counts == {SERIALIZATION: 4}
+    assert safe.report()[0] == ERROR  # still failing: still an error
+    safe.publish(FakeMsg("good"))
+    assert safe.report()[0] == OK
 
 
 def _free_port():
@@ -112,3 +130,11 @@ def test_stamp_repro_through_real_rospy(ros_env):
     assert safe["counted"] == {SERIALIZATION: 1} and safe["errors"] == []
     raw = _probe(ros_env, "--raw")
     assert raw["errors"] and raw["received"] == [100], raw
+
+
+def test_when_rospy_itself_fails_the_buffer_is_repaired_and_the_next_message_arrives(ros_env):
+    """Without the scratch serialisation the bad message reaches rospy and fails there; the
+    partial bytes are discarded, subscribers stay connected and 300 still arrives."""
+    repaired = _probe(ros_env, "--no-precheck")
+    assert repaired["received"] == [100, 300], repaired
+    assert repaired["counted"] == {PUBLISH_FAILED: 1} and repaired["repaired"] == 1

@@ -12,6 +12,7 @@ import threading
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs import safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
@@ -116,7 +117,6 @@ class BridgeNode:
         self.config = config
         self._lock = threading.Lock()
         self._counters = {}
-        self._delivery_errors_reported = 0
         # A message that cannot be delivered is dropped there; the publisher stays usable.
         self.from_fleet = SafePublisher(
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
@@ -157,8 +157,7 @@ class BridgeNode:
         try:
             msg = update_to_msg(update)
         except Exception as err:  # noqa: BLE001 - one bad value must not stop delivery
-            self._count("delivery_error.conversion")
-            rospy.logerr("conversion: dropped %s: %s: %s", what, type(err).__name__, err)
+            self.from_fleet.drop("conversion", what, err)
             return
         self.from_fleet.publish(msg, what)
 
@@ -201,22 +200,18 @@ class BridgeNode:
         status = DiagnosticStatus()
         status.name = "coaty_bridge: %s" % self.config.robot_name
         status.hardware_id = self.client.identity_id
-        delivery = dict(("delivery_error." + reason, n) for reason, n in self.from_fleet.errors.items())
-        delivery.update((k, v) for k, v in counters.items() if k.startswith("delivery_error."))
+        level, problem, errors = self.from_fleet.report()
+        delivery = dict(("delivery_error." + reason, n) for reason, n in errors.items())
         counters.update(delivery)
         counters["delivered"] = self.from_fleet.delivered
+        counters["publishers_repaired"] = self.from_fleet.repaired
         counters["publishers_recreated"] = self.from_fleet.recreated
-        failed = sum(delivery.values())
-        new_failures, self._delivery_errors_reported = failed - self._delivery_errors_reported, failed
-        if self.from_fleet.consecutive_errors >= 3:
-            # several in a row and none through since: delivery to the handler looks broken
+        if level == safe_publisher.ERROR:
             status.level = DiagnosticStatus.ERROR
-            status.message = "%d deliveries to from_fleet failed in a row (%s)" % (
-                self.from_fleet.consecutive_errors, _reasons(delivery))
-        elif new_failures:
+            status.message = problem
+        elif level == safe_publisher.WARN:
             status.level = DiagnosticStatus.WARN
-            status.message = "%d messages could not be delivered to from_fleet since the last report (%s)" % (
-                new_failures, _reasons(delivery))
+            status.message = problem
         elif self.client.connected:
             status.level = DiagnosticStatus.OK
             status.message = "connected to %s" % self.config.broker_url
@@ -228,10 +223,6 @@ class BridgeNode:
         array.header.stamp = rospy.Time.now()
         array.status = [status]
         self.diagnostics.publish(array)
-
-
-def _reasons(counts):
-    return ", ".join("%s %d" % (k.split(".", 1)[1], v) for k, v in sorted(counts.items()) if v)
 
 
 def main():

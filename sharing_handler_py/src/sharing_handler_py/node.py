@@ -12,6 +12,7 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs import safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 from sharing_msgs.srv import AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse
 from std_msgs.msg import String
@@ -103,7 +104,6 @@ class HandlerNode:
         self._dropped_reported = 0
         self._map_frame = ""
         self._list_cache = {}       # uuid -> (cells, metadata, SharedObstacle) of the last list
-        self._delivery_errors_reported = 0
         # One message that cannot be serialised is dropped there; the publisher stays usable.
         self._pub_layer = SafePublisher(
             lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100),
@@ -139,9 +139,8 @@ class HandlerNode:
         try:
             msg = msg_from_obstacle(obstacle)
         except Exception as err:  # noqa: BLE001 - one bad value must not stop the node
-            publisher.errors["conversion"] = publisher.errors.get("conversion", 0) + 1
-            rospy.logerr("%s: conversion: dropped obstacle %s v%d from %s: %s: %s", self.params.robot_name,
-                         obstacle.uuid, obstacle.version, obstacle.source, type(err).__name__, err)
+            publisher.drop("conversion", "%s: obstacle %s v%d from %s" % (
+                self.params.robot_name, obstacle.uuid, obstacle.version, obstacle.source), err)
             return
         publisher.publish(msg, "%s: obstacle %s v%d from %s" % (
             self.params.robot_name, obstacle.uuid, obstacle.version, obstacle.source))
@@ -246,19 +245,19 @@ class HandlerNode:
         dropped = sum(v for k, v in counters.items() if k.startswith("dropped_"))
         status = DiagnosticStatus(name="sharing_handler (%s)" % self.params.robot_name,
                                   hardware_id=self.params.robot_name)
-        delivery = {}
+        delivery, worst, problems = {}, safe_publisher.OK, []
         for topic, publisher in (("shared_obstacles", self._pub_layer), ("to_fleet", self._pub_fleet)):
-            for reason, n in publisher.errors.items():
+            level, problem, errors = publisher.report()
+            worst = max(worst, level)
+            problems += [problem] if problem else []
+            for reason, n in errors.items():
                 delivery["delivery_error.%s.%s" % (topic, reason)] = n
-        failed = sum(delivery.values())
-        new_failures, self._delivery_errors_reported = failed - self._delivery_errors_reported, failed
-        stuck = max(self._pub_layer.consecutive_errors, self._pub_fleet.consecutive_errors)
-        if stuck >= 3:
+        if worst == safe_publisher.ERROR:
             status.level = DiagnosticStatus.ERROR
-            status.message = "%d deliveries failed in a row" % stuck
-        elif new_failures:
+            status.message = "; ".join(problems)
+        elif worst == safe_publisher.WARN:
             status.level = DiagnosticStatus.WARN
-            status.message = "%d messages could not be delivered since the last report" % new_failures
+            status.message = "; ".join(problems)
         elif dropped > self._dropped_reported:
             status.level = DiagnosticStatus.WARN
             status.message = "%d messages dropped since the last report" % (dropped - self._dropped_reported)
