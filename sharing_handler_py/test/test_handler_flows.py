@@ -106,6 +106,32 @@ def test_internal_update_keeps_the_first_rectangle_and_deadline():
     assert sent.rectangle == rect(0, 0, 1, 1) and sent.deadline == 60
 
 
+def test_internal_update_carries_the_lifetime_left_when_it_is_sent():
+    """A robot that missed the first share adds the obstacle from an update: it must not keep
+    it longer than the robot that shared it (issue 15, item 2)."""
+    r = Recorder(duration=60)
+    shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    r.clock.now += 25.4
+    sent = r.handler.on_internal_update(update(shared.uuid, marked=(1,), version=2, source="robot_0",
+                                               deadline=60))
+    assert sent.deadline == 34  # 34.6 s left, rounded down
+    late = Recorder("robot_1", clock=r.clock)
+    late.handler.on_external(sent)
+    assert late.handler.get(shared.uuid).remaining <= r.handler.get(shared.uuid).remaining
+
+
+def test_a_later_copy_can_bring_expiry_closer_but_never_push_it_back():
+    r = Recorder(duration=60)
+    r.handler.on_external(update(U("a"), marked=(1,), version=1, deadline=30))   # expires at 130
+    r.clock.now += 10
+    r.handler.on_external(update(U("a"), marked=(2,), version=2, deadline=50))   # would be 160
+    assert r.handler.get(U("a")).remaining == pytest.approx(20.0)
+    r.handler.on_external(update(U("a"), marked=(3,), version=3, deadline=5))    # 115: sooner
+    assert r.handler.get(U("a")).remaining == pytest.approx(5.0)
+    r.clock.now += 5
+    assert r.handler.expire() == [U("a")]
+
+
 def test_internal_update_for_an_unknown_uuid_is_dropped():
     r = Recorder()
     assert r.handler.on_internal_update(update(U("nope"), marked=(1,), source="robot_0")) is None
@@ -284,7 +310,7 @@ def test_list_holds_full_state_sorted_by_uuid_with_remaining_time():
     assert [h.uuid for h in held] == [U("a"), U("b")]
     full = held[0].to_obstacle()
     assert (full.marked, full.cleared, full.deadline, full.version, full.source) == \
-        ((1, 5), (), 8, 1, "robot_1")
+        ((1, 5), (), 7, 1, "robot_1")  # 7.5 s left: rounded down, a copy must not outlive it
     assert held[0].remaining == pytest.approx(7.5)
 
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import paho.mqtt.client as mqtt
 
-from coaty_bridge import codec
+from coaty_bridge import codec, lifetimes
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
 
@@ -146,6 +146,7 @@ class CoatyBridgeClient:
         self._counters = collections.Counter()
         self._queue = collections.deque()
         self._current = ()
+        self._current_as_of = 0.0   # clock time at which the deadlines in _current were valid
         self._pending_discovers = {}
         self._connected = False
         self._ever_connected = False
@@ -205,6 +206,10 @@ class CoatyBridgeClient:
         if sock is not None:
             sock.close()
 
+    def clock(self):
+        """The client's clock (monotonic seconds unless injected)."""
+        return self._clock()
+
     @property
     def connected(self):
         return self._connected
@@ -225,8 +230,7 @@ class CoatyBridgeClient:
     def publish_obstacle(self, update):
         """Publishes one internal ObstacleUpdate to the fleet (Advertise). Returns
         False if it was dropped (too large); queues it while offline."""
-        payload = codec.advertise_payload(
-            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+        payload = self._obstacle_payload(update)
         if len(payload) > self.config.max_payload_bytes:
             self._count("dropped_outgoing.oversized")
             LOG.warning("%s: obstacle %s v%d not published: %d bytes exceed max_payload_bytes %d",
@@ -235,16 +239,25 @@ class CoatyBridgeClient:
             return False
         self._count("published")
         self._count("bytes_published", len(payload))
-        self._send(self._obstacle_topic, payload)
+        self._send(self._obstacle_topic, payload, update=update)
         return True
 
-    def set_current_obstacles(self, updates):
-        """The robot's current full obstacles, used to answer obstacle Discovers."""
+    def _obstacle_payload(self, update):
+        return codec.advertise_payload(
+            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+
+    def set_current_obstacles(self, updates, as_of=None):
+        """The robot's current full obstacles, used to answer obstacle Discovers; their
+        deadlines were valid at clock time `as_of` (default: now) and are aged from there."""
         current = tuple(updates)
+        as_of = self._clock() if as_of is None else as_of
         with self._lock:
             self._current = current
+            self._current_as_of = as_of
 
-    def _send(self, topic, payload, queue=True):
+    def _send(self, topic, payload, queue=True, update=None, queued_at=None):
+        """Publishes now, or (``queue``) keeps it while offline. An obstacle ``update`` is kept
+        with the time it was queued, so its deadline is aged when it finally goes out."""
         with self._lock:
             if self._connected:
                 info = self._mqtt.publish(topic, payload, qos=self._qos)
@@ -258,13 +271,25 @@ class CoatyBridgeClient:
                     self._queue.popleft()  # the newest update is worth more than the oldest
                 else:
                     return
-            self._queue.append((topic, payload))
+            self._queue.append((topic, payload, update, self._clock() if queued_at is None else queued_at))
 
     def _flush_queue(self):
         with self._lock:
             pending, self._queue = list(self._queue), collections.deque()
-        for topic, payload in pending:
-            self._send(topic, payload)
+        now = self._clock()
+        for topic, payload, update, queued_at in pending:
+            if update is not None:
+                fresh = lifetimes.aged(update, now - queued_at)
+                if fresh is None:
+                    # it expired on every robot while we were offline: sending it would revive it
+                    self._count("queue_expired")
+                    continue
+                if fresh is not update:
+                    payload = self._obstacle_payload(fresh)
+                # its deadline is now valid as of now (should the send fail and re-queue it)
+                self._send(topic, payload, update=fresh, queued_at=now)
+            else:
+                self._send(topic, payload)
 
     def _discover_obstacles(self):
         correlation_id = new_uuid()
@@ -383,8 +408,15 @@ class CoatyBridgeClient:
             self._count("resolves_sent")
         if request.obstacles:
             with self._lock:
-                current = self._current
+                current, as_of = self._current, self._current_as_of
+            elapsed = self._clock() - as_of
             for update in current:
+                # the list's deadlines were valid at as_of: age them to now (a copy made from
+                # a Resolve must not outlive the original)
+                update = lifetimes.aged(update, elapsed)
+                if update is None:
+                    self._count("resolve_skipped_expired")
+                    continue
                 payload = codec.resolve_payload(
                     codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
                 if len(payload) <= self.config.max_payload_bytes:

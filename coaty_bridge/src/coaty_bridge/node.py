@@ -191,7 +191,16 @@ class BridgeNode:
                 self._count("dropped_list_item")
                 rospy.logwarn("%s: shared_obstacle_list item %r skipped: %s", self.config.robot_name,
                               item.uuid[:40], err)
-        self.client.set_current_obstacles(updates)
+        self.client.set_current_obstacles(updates, as_of=self._list_as_of(msg.header.stamp))
+
+    def _list_as_of(self, stamp):
+        """Client-clock time at which the list's deadlines were valid. The handler ages them to
+        header.stamp (ROS time); a latched list can be old when it reaches a bridge that started
+        later, so its age is taken off. A zero stamp (unknown) counts as now."""
+        age = 0.0
+        if not stamp.is_zero():
+            age = max(0.0, rospy.get_time() - stamp.to_sec())
+        return self.client.clock() - age
 
     def _publish_diagnostics(self, _event=None):
         counters = self.client.counters()

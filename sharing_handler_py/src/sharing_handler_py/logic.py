@@ -58,21 +58,30 @@ class HeldObstacle:
     uuid: str
     source: str            # the robot that first shared it
     version: int           # the greatest version seen
-    deadline: int          # seconds after local arrival
+    deadline: int          # seconds, as in the message that defines the metadata (first share)
     rectangle: Rectangle
     geometry: Geometry
     frame_id: str
     cells: Tuple[int, ...]  # present cells, sorted
     arrival: float         # local arrival time (clock seconds)
-    remaining: float       # seconds left at the time of the listing
+    remaining: float       # seconds left at the time of the listing (expiry - now)
 
     def to_obstacle(self):
         """Full-state message: cells marked, nothing cleared, deadline = remaining seconds
-        rounded up (at least 1)."""
+        rounded down (at least 1), so a copy made from it never outlives this one by more
+        than a second."""
         return Obstacle(uuid=self.uuid, marked=self.cells, cleared=(),
-                        deadline=max(1, int(math.ceil(self.remaining))), rectangle=self.rectangle,
+                        deadline=remaining_deadline(self.remaining), rectangle=self.rectangle,
                         source=self.source, geometry=self.geometry, version=self.version,
                         frame_id=self.frame_id)
+
+
+def remaining_deadline(remaining):
+    """Seconds left -> the deadline a message carries: whole seconds rounded down (a copy must
+    not outlive the original), at least 1 (0 would be refused as expiring on arrival)."""
+    if not math.isfinite(remaining):
+        return 1
+    return int(min(obstacle_rules.MAX_UINT32, max(1, math.floor(remaining))))
 
 
 def _meta_key(obstacle):
@@ -86,7 +95,7 @@ class _Entry:
     """Mutable state of one held obstacle."""
 
     __slots__ = ("uuid", "source", "rectangle", "deadline", "geometry", "frame_id", "arrival",
-                 "first_key", "max_version", "stamps", "present", "sorted_cells")
+                 "expires_at", "first_key", "max_version", "stamps", "present", "sorted_cells")
 
     def __init__(self, obstacle, arrival):
         self.uuid = obstacle.uuid
@@ -96,6 +105,10 @@ class _Entry:
         self.geometry = obstacle.geometry
         self.frame_id = obstacle.frame_id
         self.arrival = arrival
+        # Local expiry. Deadlines on the wire are remaining lifetimes aged to the moment of
+        # sending, so arrival + deadline is the original's expiry (plus transit); a later
+        # copy can only bring it closer, never push it back (see note_deadline).
+        self.expires_at = arrival + obstacle.deadline
         self.first_key = _meta_key(obstacle)
         self.max_version = obstacle.version
         self.stamps = {}          # cell -> (version, source) of the update that last set it
@@ -136,6 +149,10 @@ class _Entry:
         if changed:
             self.sorted_cells = None
         return changed
+
+    def note_deadline(self, now, deadline):
+        """Another message for this obstacle arrived at `now` saying `deadline` s remain."""
+        self.expires_at = min(self.expires_at, now + deadline)
 
     def cells(self):
         if self.sorted_cells is None:
@@ -278,6 +295,9 @@ class SharingHandler:
                 raise InvalidMessageError("no_geometry", "no grid known yet")
             check_message_values(obstacle)
             self._check_grid(obstacle)
+            if entry.expires_at - self._clock() < 1.0:
+                # deadlines travel in whole seconds: sent now it would outlive the obstacle here
+                raise InvalidMessageError("expired", "obstacle %s has less than 1 s left" % obstacle.uuid)
             if obstacle.version <= entry.max_version and entry.max_version >= obstacle_rules.MAX_VERSION:
                 raise InvalidMessageError("bad_version", "obstacle %s is at the last version %d"
                                           % (obstacle.uuid, entry.max_version))
@@ -297,11 +317,14 @@ class SharingHandler:
             _log.debug("%s: internal update of %s claims source %r; set to own name",
                        self.robot_name, obstacle.uuid, obstacle.source)
             changes["source"] = self.robot_name
-        # The rectangle and deadline never change after the first share (DESIGN.md §5.7).
+        # The rectangle never changes after the first share (DESIGN.md §5.7). The deadline
+        # goes out as the lifetime left now, so a robot that missed the first share and
+        # adds the obstacle from this update does not keep it longer than we do.
         if obstacle.rectangle != entry.rectangle:
             changes["rectangle"] = entry.rectangle
-        if obstacle.deadline != entry.deadline:
-            changes["deadline"] = entry.deadline
+        left = remaining_deadline(entry.expires_at - self._clock())
+        if obstacle.deadline != left:
+            changes["deadline"] = left
         if changes:
             obstacle = obstacle.replace(**changes)
         try:
@@ -346,6 +369,7 @@ class SharingHandler:
                       obstacle.deadline)
         else:
             changed = entry.apply(obstacle)
+            entry.note_deadline(self._clock(), obstacle.deadline)
         self._counters["updates_in"] += 1
         self._to_layer(obstacle)
         if changed:
@@ -395,15 +419,15 @@ class SharingHandler:
         """Removes every obstacle whose deadline has passed since its local arrival (no message
         goes to the fleet; the layer is told). Returns the expired uuids, sorted."""
         now = self._clock()
-        gone = sorted(u for u, e in self._entries.items() if now - e.arrival >= e.deadline)
+        gone = sorted(u for u, e in self._entries.items() if now >= e.expires_at)
         for uuid in gone:
             entry = self._entries.pop(uuid)
             # Remember the uuid at least obstacle_duration more, so a late message cannot
             # resurrect the obstacle on this robot only.
             self._tombstones[uuid] = now + max(self._deadline, entry.deadline)
             self._counters["expired"] += 1
-            _log.info("%s: obstacle %s expired (%d s after arrival at %.3f)", self.robot_name, uuid,
-                      entry.deadline, entry.arrival)
+            _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
+                      entry.expires_at - entry.arrival, entry.arrival)
             self._expired_out(uuid)
         for uuid in [u for u, until in self._tombstones.items() if now >= until]:
             del self._tombstones[uuid]
@@ -461,5 +485,4 @@ class SharingHandler:
         return HeldObstacle(uuid=entry.uuid, source=entry.source, version=entry.max_version,
                             deadline=entry.deadline, rectangle=entry.rectangle,
                             geometry=entry.geometry, frame_id=entry.frame_id, cells=entry.cells(),
-                            arrival=entry.arrival,
-                            remaining=entry.deadline - (now - entry.arrival))
+                            arrival=entry.arrival, remaining=entry.expires_at - now)

@@ -4,7 +4,6 @@ Runs as robot_N/sharing_handler; every topic and service name is relative to the
 namespace except /diagnostics and the map topic. See the package README for the interface.
 """
 import logging
-import math
 import sys
 import threading
 
@@ -19,7 +18,7 @@ from std_msgs.msg import String
 
 from sharing_handler_py import snapshot
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError, InvalidRequestError
-from sharing_handler_py.logic import SharingHandler
+from sharing_handler_py.logic import SharingHandler, remaining_deadline
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
 
 
@@ -237,7 +236,7 @@ class HandlerNode:
         fresh[held.uuid] = cached
         msg = cached[2]
         msg.header.stamp = now
-        msg.deadline = max(1, int(math.ceil(held.remaining)))
+        msg.deadline = remaining_deadline(held.remaining)  # aged to header.stamp, rounded down
         return msg
 
     def _publish_diagnostics(self):
