@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 import paho.mqtt.client as mqtt
 
 from coaty_bridge import codec, lifetimes
-from coaty_bridge.errors import CoatyError
+from coaty_bridge.errors import CoatyError, ForgedSourceError
+from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
 
 LOG = logging.getLogger(__name__)
@@ -73,6 +74,7 @@ class BridgeConfig:
     reconnect_min_delay: float = 0.5
     reconnect_max_delay: float = 30.0
     discover_window: float = 30.0
+    authenticate_sources: bool = False
     address: BrokerAddress = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -85,13 +87,25 @@ class BridgeConfig:
                 fail(name, err)
         if self.object_type.startswith("coaty."):
             fail("object_type", "the coaty.* object types are reserved")
+        if not isinstance(self.authenticate_sources, bool):
+            fail("authenticate_sources", "must be true or false")
         if self.identity_id:
             try:
                 object.__setattr__(self, "identity_id", check_uuid(self.identity_id, "identity_id"))
             except CoatyError as err:
                 fail("identity_id", err)
+            if self.authenticate_sources and self.identity_id != identity_for(self.namespace, self.robot_name):
+                fail("identity_id", "with authenticate_sources the identity must be the one derived "
+                                    "from the name, %s" % identity_for(self.namespace, self.robot_name))
+        elif self.authenticate_sources:
+            # the broker's ACL and every receiver bind this id to the robot's name
+            object.__setattr__(self, "identity_id", identity_for(self.namespace, self.robot_name))
         else:
             object.__setattr__(self, "identity_id", new_uuid())
+        if self.authenticate_sources and not self.username:
+            # the ACL's %u is the sourceId: log in as the identity (a TLS broker with
+            # use_identity_as_username takes it from the certificate's CN instead)
+            object.__setattr__(self, "username", self.identity_id)
         try:
             object.__setattr__(self, "address", parse_broker_url(self.broker_url))
         except ValueError as err:
@@ -391,6 +405,17 @@ class CoatyBridgeClient:
                     str(topic_text)[:120], err, excerpt)
 
     def _deliver(self, update, topic):
+        if self.config.authenticate_sources:
+            expected = identity_for(self.config.namespace, update.source)
+            if topic.source_id != expected:
+                # Only the robot itself may speak for it: an update or clear of another robot's
+                # obstacle is fine, but under the sender's own name (and the broker's ACL makes
+                # sure the sender's sourceId is its own).
+                self._drop(ForgedSourceError(
+                    "obstacle %s v%d claims source %r (identity %s) but was sent by %s"
+                    % (update.uuid, update.version, update.source, expected, topic.source_id)),
+                    str(topic), b"")
+                return
         self._count("received")
         try:
             self._on_obstacle(update, topic)

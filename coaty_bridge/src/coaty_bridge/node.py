@@ -25,7 +25,7 @@ LOG = logging.getLogger(__name__)
 _PARAMS = ("broker_url", "namespace", "object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
-           "reconnect_max_delay", "discover_window")
+           "reconnect_max_delay", "discover_window", "authenticate_sources")
 
 
 def msg_to_update(msg):
