@@ -341,3 +341,12 @@ def test_same_messages_same_state_and_duplicates_change_nothing():
     for m in reversed(msgs):
         b.handler.on_external(m)
     assert state(a.handler) == state(b.handler)
+
+
+def test_after_a_restart_own_obstacles_are_accepted_back_from_peers_but_echoes_of_held_ones_are_not():
+    r = Recorder("robot_0")
+    mine = update(U("mine"), marked=(3,), version=2, source="robot_0")
+    assert r.handler.on_external(mine)                    # not held: a peer gives it back
+    assert r.handler.get(U("mine")).cells == (3,)
+    assert r.handler.on_external(mine.replace(version=3, marked=(4,))) is False  # held: an echo
+    assert r.handler.counters["dropped_own_source"] == 1

@@ -146,6 +146,10 @@ def _make_paho_client(client_id):
     return mqtt.Client(client_id=client_id, clean_session=True)
 
 
+#: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
+OWN_LOG_PER_OBSTACLE = 200
+
+
 class CoatyBridgeClient:
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
@@ -161,6 +165,10 @@ class CoatyBridgeClient:
         self._queue = collections.deque()
         self._current = ()
         self._current_as_of = 0.0   # clock time at which the deadlines in _current were valid
+        # uuid -> [(update, sent_at)]: this robot's own updates of live obstacles, replayed to a
+        # Discover so a robot back from a partition or restart gets every cell's exact stamp
+        # (a full-state entry alone cannot carry a clear; see README "Partitions and restarts")
+        self._own_log = collections.OrderedDict()
         self._pending_discovers = {}
         self._connected = False
         self._ever_connected = False
@@ -253,8 +261,31 @@ class CoatyBridgeClient:
             return False
         self._count("published")
         self._count("bytes_published", len(payload))
+        self._log_own(update)
         self._send(self._obstacle_topic, payload, update=update)
         return True
+
+    def _log_own(self, update):
+        with self._lock:
+            entries = self._own_log.setdefault(update.uuid, [])
+            entries.append((update, self._clock()))
+            if len(entries) > OWN_LOG_PER_OBSTACLE:
+                del entries[0]
+                self._counters["own_log_truncated"] += 1
+
+    def _replayable_own_updates(self):
+        """This robot's own updates still alive, aged to now; expired ones are forgotten."""
+        now = self._clock()
+        replay = []
+        with self._lock:
+            for uuid in list(self._own_log):
+                alive = [(u, t) for u, t in self._own_log[uuid] if lifetimes.aged(u, now - t) is not None]
+                if alive:
+                    self._own_log[uuid] = alive
+                    replay += [lifetimes.aged(u, now - t) for u, t in alive]
+                else:
+                    del self._own_log[uuid]
+        return replay
 
     def _obstacle_payload(self, update):
         return codec.advertise_payload(
@@ -432,6 +463,12 @@ class CoatyBridgeClient:
             self._send(reply, codec.resolve_payload(self._identity), queue=False)
             self._count("resolves_sent")
         if request.obstacles:
+            for update in self._replayable_own_updates():
+                payload = codec.resolve_payload(
+                    codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+                if len(payload) <= self.config.max_payload_bytes:
+                    self._send(reply, payload, queue=False)
+                    self._count("resolves_sent")
             with self._lock:
                 current, as_of = self._current, self._current_as_of
             elapsed = self._clock() - as_of

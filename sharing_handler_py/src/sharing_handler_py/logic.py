@@ -469,7 +469,9 @@ class SharingHandler:
     def _check_external(self, obstacle):
         # The same rules the bridge applies to what arrives over MQTT (neither is looser).
         check_fleet_message(obstacle)
-        if obstacle.source == self.robot_name:
+        if obstacle.source == self.robot_name and obstacle.uuid in self._entries:
+            # An echo, or someone else speaking for us about an obstacle we hold. An own obstacle
+            # we do not hold is accepted: after a restart, peers give our obstacles back.
             raise InvalidMessageError("own_source", "message claims to come from this robot")
         if obstacle.uuid in self._tombstones:
             raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
