@@ -27,6 +27,9 @@ BENCHMARKS = {
                 "SharingHandler: updates/s, latency, memory per obstacle"),
     "bridge": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_bridge")],
                "Coaty bridge over mosquitto: events/s, latency, compact vs plain bytes"),
+    "fleet_scale": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_fleet_scale")],
+                    "100 simulated robots on one mosquitto (latency to every peer, CPU, memory, bytes), "
+                    "then two bridged brokers"),
     "sim": ([sys.executable, os.path.join(ROOT, "fleet_sim", "scripts", "bench_sim")],
             "simulator: real-time factor for 2 and 20 robots"),
     "nav": ([sys.executable, os.path.join(ROOT, "fleet_nav", "scripts", "bench_nav")],

@@ -20,6 +20,8 @@ PACKAGES=(
   python3-tf2-msgs libdiagnostic-msgs-dev libvisualization-msgs-dev
   # the MQTT broker, and Node.js/npm for the Coaty JS interop test
   mosquitto nodejs npm
+  # openssl CLI: the TLS tests make a CA and per-robot certificates (coaty_bridge.pki)
+  openssl
 )
 
 missing=()

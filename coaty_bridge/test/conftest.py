@@ -10,6 +10,11 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 if SRC not in sys.path:
     sys.path.insert(0, SRC)
+# sharing_msgs' pure helpers (obstacle_rules) without a built workspace; appended, so a sourced
+# workspace's sharing_msgs (with the generated msg package) wins.
+MSGS_SRC = os.path.join(os.path.dirname(os.path.dirname(SRC)), "sharing_msgs", "src")
+if MSGS_SRC not in sys.path:
+    sys.path.append(MSGS_SRC)
 
 
 def pytest_configure(config):

@@ -1,5 +1,7 @@
 """Bridge agents against a real mosquitto started by each test."""
+import dataclasses
 import json
+import time
 import uuid as uuidlib
 
 import pytest
@@ -29,16 +31,26 @@ def test_obstacle_reaches_the_peer_intact_and_is_not_echoed(make_client, make_up
     assert a.counters()["echoes_suppressed"] >= 1
 
 
+def assert_aged(got, want, held_for):
+    """`got` is `want` sent after being held up to `held_for` s: every field equal, the deadline
+    aged by the time held and rounded down (issue 15, item 2)."""
+    assert dataclasses.replace(got, deadline=want.deadline) == want
+    assert want.deadline - held_for - 1 <= got.deadline <= want.deadline - 1, (got.deadline, want.deadline, held_for)
+
+
 def test_late_joiner_gets_current_obstacles_through_resolve(make_client, make_update, wait_for):
     first, second = make_update(source="robot_0"), make_update(source="robot_0", version=4)
     bystander = make_client("robot_2")
     wait_for(lambda: bystander.connected, what="bystander connected")
     a = make_client("robot_0")
     wait_for(lambda: bystander.counters().get("discovers_answered"), what="robot_0's discover")
+    listed_at = time.monotonic()
     a.set_current_obstacles([first, second])
     late = make_client("robot_1")
     wait_for(lambda: len(late.received_updates) == 2, what="resolves to the late joiner")
-    assert sorted(late.received_updates, key=lambda u: u.version) == [first, second]
+    held = time.monotonic() - listed_at
+    for got, want in zip(sorted(late.received_updates, key=lambda u: u.version), [first, second]):
+        assert_aged(got, want, held)
     assert late.counters()["discovers_sent"] == 1
     wait_for(lambda: bystander.counters().get("ignored", 0) >= 2, what="bystander ignores foreign resolves")
     assert bystander.received_updates == []
@@ -88,6 +100,7 @@ def test_offline_queue_is_bounded_counts_drops_and_flushes_on_reconnect(make_upd
             broker.stop()
             wait_for(lambda: not a.connected, what="disconnect noticed")
             updates = [make_update(version=v) for v in range(1, 6)]
+            queued_at = time.monotonic()
             for update in updates:
                 a.publish_obstacle(update)
             assert a.counters()["queue_drops"] == 2
@@ -95,7 +108,8 @@ def test_offline_queue_is_bounded_counts_drops_and_flushes_on_reconnect(make_upd
             with Broker(port=port):
                 wait_for(lambda: b.connected, what="peer reconnected")
                 wait_for(lambda: len(peer_received) == 3, timeout=10, what="queued updates after reconnect")
-                assert peer_received == updates[2:]
+                for got, want in zip(peer_received, updates[2:]):
+                    assert_aged(got, want, time.monotonic() - queued_at)
                 assert a.counters()["reconnects"] == 1 and a.counters()["queue_length"] == 0
         finally:
             a.stop(timeout=0.5)

@@ -54,7 +54,7 @@ def coaty_js():
 def ros_obstacle(source, **fields):
     # 64 cells in a row, so the compact form is the deflated one; 3 scattered cleared cells.
     msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=list(range(2001000, 2001064)) + [2003005, 3999999],
-               cleared_indexes=[5, 2000999, 2002999], deadline=90, rectangle_shape=[0.25, 0.5, 1.75, 2.0], source=source,
+               cleared_indexes=[5, 2000999, 2002999], deadline=90, rectangle_shape=[0.25, 7.5, 1.75, 9.0], source=source,
                resolution=0.05000000074505806, origin_x=-12.5, origin_y=7.25, size_x=2000, size_y=2000,
                version=1, stamp=1700000123.5, frame_id="map")
     msg.update(fields)

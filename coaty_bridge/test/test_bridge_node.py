@@ -56,7 +56,7 @@ def test_node_bridges_ros_and_mqtt_and_counts_bad_input(ros_graph, broker, obser
     topic = "coaty/3/fleet/ADV::%s/%s" % (OT, PEER)
     observer.publish(topic, b"{broken")
     observer.publish(topic.replace(PEER, "robot_1"), b"{}")
-    external = codec.ObstacleUpdate(str(uuidlib.uuid4()), "robot_1", 2, 50.0, "map", 10, (0, 0, 1, 1),
+    external = codec.ObstacleUpdate(str(uuidlib.uuid4()), "robot_1", 2, 50.0, "map", 10, (1, 2, 2, 3),
                                     0.1, 1.0, 2.0, 10, 10, (3, 4), (8,))
     observer.publish(topic, codec.advertise_payload(codec.obstacle_to_object(external, OT)))
     event = probe.expect(lambda e: e.get("event") == "from_fleet", what="from_fleet")

@@ -22,7 +22,7 @@ def wire(update, compact=True):
 
 @pytest.mark.parametrize("compact", [True, False])
 def test_obstacle_survives_the_wire_with_every_field(make_update, compact):
-    update = make_update(version=7, deadline=0, marked=(0, 5, 3999999), cleared=())
+    update = make_update(version=7, deadline=1, marked=(0, 5, 3999999), cleared=())
     obj = wire(update, compact)
     assert obj["objectId"] == update.uuid and obj["coreType"] == "CoatyObject"
     assert obj["objectType"] == OT and "parentObjectId" not in obj
@@ -102,7 +102,7 @@ def test_bad_field_values_raise_errors_naming_them(make_update, key, value, erro
 
 
 def test_index_count_is_bounded_by_the_grid_and_the_limit(make_update):
-    obj = wire(make_update(size_x=4, size_y=2, marked=(), cleared=()), False)
+    obj = wire(make_update(size_x=4, size_y=2, marked=(0,), cleared=(), rectangle=(-10, -20, -9.9, -19.95)), False)
     obj["markedIndexes"] = list(range(8))
     assert len(obstacle_from_object(obj, OT).marked) == 8
     obj["markedIndexes"] = list(range(8)) + [1]
@@ -139,7 +139,7 @@ def test_update_value_validates_itself(make_update):
         make_update(uuid="not-a-uuid")
     with pytest.raises(NonFiniteNumberError, match="origin_x"):
         make_update(origin_x=math.inf)
-    with pytest.raises(OutOfRangeError, match="marked index 4000000"):
+    with pytest.raises(OutOfRangeError, match="marked_indexes 4000000"):
         make_update(marked=(4000000,))
 
 

@@ -42,12 +42,13 @@ BAD_VALUES = {
 
 
 def good_object(rng):
-    marked = sorted(rng.sample(range(100), rng.randint(0, 20)))
+    marked = sorted(rng.sample(range(100), rng.randint(1, 20)))
+    origin_x, origin_y = rng.uniform(-50, 50), rng.uniform(-50, 50)
     update = codec.ObstacleUpdate(
         uuid=str(uuidlib.UUID(int=rng.getrandbits(128), version=4)), source="robot_%d" % rng.randint(0, 9),
         version=rng.randint(1, 10 ** 6), stamp=rng.uniform(0, 2e9), frame_id="map",
-        deadline=rng.randint(0, 3600), rectangle=(0.0, 0.0, 0.5, 0.5), resolution=0.05,
-        origin_x=rng.uniform(-50, 50), origin_y=rng.uniform(-50, 50), size_x=10, size_y=10,
+        deadline=rng.randint(1, 3600), rectangle=(origin_x, origin_y, origin_x + 0.5, origin_y + 0.5),
+        resolution=0.05, origin_x=origin_x, origin_y=origin_y, size_x=10, size_y=10,
         marked=tuple(marked), cleared=())
     return codec.obstacle_to_object(update, OT, compact_indexes=rng.random() < 0.5), update
 

@@ -3,12 +3,23 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src"))
+# sharing_msgs' pure helpers without a built workspace; appended, so a sourced workspace wins.
+sys.path.append(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "sharing_msgs", "src"))
 
 from sharing_handler_py.logic import SharingHandler  # noqa: E402
 from sharing_handler_py.validation import Geometry, Obstacle, Rectangle  # noqa: E402
 
 GRID = Geometry(0.05, -10.0, -5.0, 400, 200)   # 20 m x 10 m
 OTHER_GRID = Geometry(0.1, -10.0, -5.0, 200, 100)
+
+
+def U(name):
+    """A UUID standing for a readable test name ("ext-1"): the name's bytes, zero-padded, as
+    hex. Order-preserving, so tests that sort by uuid keep their order."""
+    raw = name.encode("ascii")
+    assert len(raw) <= 16, name
+    h = (raw + b"\0" * (16 - len(raw))).hex()
+    return "%s-%s-%s-%s-%s" % (h[:8], h[8:12], h[12:16], h[16:20], h[20:])
 
 
 class FakeClock:
@@ -27,7 +38,7 @@ class Recorder:
         self.layer, self.fleet, self.expired, self.events = [], [], [], []
         self.changes = 0
         counter = iter(range(1, 1 << 30))
-        factory = (lambda: "%s-%04d" % (uuids, next(counter))) if uuids else None
+        factory = (lambda: U("%s-%04d" % (uuids, next(counter)))) if uuids else None
 
         def to(kind, sink):
             def out(item):
@@ -55,10 +66,10 @@ def proposal(cells=(10, 11, 12), rectangle=None, geometry=GRID, source="robot_0"
 
 
 def update(uuid, marked=(), cleared=(), version=2, source="robot_1", deadline=30, rectangle=None,
-           geometry=GRID):
+           geometry=GRID, stamp=0.0):
     return Obstacle(uuid=uuid, marked=tuple(marked), cleared=tuple(cleared), deadline=deadline,
                     rectangle=rectangle or rect(-10, -5, -9, -4), source=source, geometry=geometry,
-                    version=version, frame_id="map")
+                    version=version, frame_id="map", stamp=stamp)
 
 
 def state(handler):

@@ -27,6 +27,9 @@ NS = "/robot_0/"
 RES, OX, OY, SX, SY = 0.05, -5.0, -2.5, 200, 100
 UUID4 = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-4[0-9a-f]{3}-[89ab][0-9a-f]{3}-[0-9a-f]{12}$")
 HERE = os.path.dirname(os.path.abspath(__file__))
+# Fleet messages carry UUIDs (sharing_msgs.obstacle_rules); fixed ones keep the test readable.
+EXT1 = "00000000-0000-4000-8000-00000000e001"
+SHORT1 = "00000000-0000-4000-8000-00000000e002"
 
 
 def obstacle(uuid="", marked=(), cleared=(), deadline=30, rect=(0.0, 0.0, 0.5, 0.5), source="robot_1",
@@ -163,28 +166,28 @@ class TestHandlerNode(unittest.TestCase):
     def test_04_external_add_and_update_go_to_the_layer_and_never_back_out(self):
         bus = self.bus
         before = time.time()
-        bus.from_fleet.publish(obstacle(uuid="ext-1", marked=(1000, 1001, 1002), version=1, deadline=30,
+        bus.from_fleet.publish(obstacle(uuid=EXT1, marked=(1000, 1001, 1002), version=1, deadline=30,
                                         rect=(2.0, 0.0, 2.5, 0.5), source="robot_1"))
-        wait_for(lambda: "ext-1" in bus.listed(), what="ext-1 in the list")
-        bus.from_fleet.publish(obstacle(uuid="ext-1", marked=(1002, 1003), cleared=(1000,), version=2,
+        wait_for(lambda: EXT1 in bus.listed(), what="ext-1 in the list")
+        bus.from_fleet.publish(obstacle(uuid=EXT1, marked=(1002, 1003), cleared=(1000,), version=2,
                                         deadline=30, rect=(2.0, 0.0, 2.5, 0.5), source="robot_2"))
-        wait_for(lambda: list(bus.listed()["ext-1"].marked_indexes) == [1001, 1002, 1003],
+        wait_for(lambda: list(bus.listed()[EXT1].marked_indexes) == [1001, 1002, 1003],
                  what="ext-1 updated")
-        self.assertEqual([m.uuid for m in bus.shared[1:]], ["ext-1", "ext-1"])
+        self.assertEqual([m.uuid for m in bus.shared[1:]], [EXT1, EXT1])
         self.assertEqual([m.version for m in bus.shared[1:]], [1, 2])
         self.assertEqual(len(bus.fleet), 2, "external messages are never sent back out")
-        listed = bus.listed()["ext-1"]
+        listed = bus.listed()[EXT1]
         self.assertEqual((listed.source, listed.version), ("robot_1", 2))
         reply = self.list_srv()
-        index = [o.uuid for o in reply.obstacles].index("ext-1")
+        index = [o.uuid for o in reply.obstacles].index(EXT1)
         self.assertAlmostEqual(reply.arrival_times[index], before, delta=2.0)
         self.assertTrue(27 < reply.remaining_seconds[index] <= 30, reply.remaining_seconds[index])
         self.assertEqual(list(reply.obstacles[index].marked_indexes), [1001, 1002, 1003])
-        self.assertEqual(sorted(o.uuid for o in reply.obstacles), sorted([self.own.uuid, "ext-1"]))
+        self.assertEqual(sorted(o.uuid for o in reply.obstacles), sorted([self.own.uuid, EXT1]))
 
     def test_05_bad_fleet_messages_are_dropped_logged_and_counted(self):
         bus = self.bus
-        good = dict(uuid="ext-1", marked=(1500,), version=5, source="robot_9", deadline=30,
+        good = dict(uuid=EXT1, marked=(1500,), version=5, source="robot_9", deadline=30,
                     rect=(2.0, 0.0, 2.5, 0.5))
         bad = {
             "empty_uuid": dict(uuid=""),
@@ -197,6 +200,8 @@ class TestHandlerNode(unittest.TestCase):
             "malformed": dict(rect=(0.0, 0.0, 1.0)),
             "own_source": dict(source="robot_0"),
             "bad_version": dict(version=0),
+            "empty_update": dict(marked=()),
+            "rectangle_outside_grid": dict(rect=(-1e38, -1e38, 1e38, 1e38)),
         }
         listed_before = {u: list(o.marked_indexes) for u, o in bus.listed().items()}
         for reason, change in bad.items():
@@ -216,7 +221,7 @@ class TestHandlerNode(unittest.TestCase):
                 self.assertTrue(lines and "robot_9" in lines[0], (reason, bus.rosout[-12:]))
         # the node is still alive and applies the next good message
         bus.from_fleet.publish(obstacle(**good))
-        wait_for(lambda: 1500 in bus.listed()["ext-1"].marked_indexes, what="the good message")
+        wait_for(lambda: 1500 in bus.listed()[EXT1].marked_indexes, what="the good message")
 
     def test_06_manual_add_is_shared_like_a_detection(self):
         bus = self.bus
@@ -233,17 +238,17 @@ class TestHandlerNode(unittest.TestCase):
     def test_07_expiry_tells_the_layer_and_sends_nothing_to_the_fleet(self):
         bus = self.bus
         fleet_before = len(bus.fleet)
-        bus.from_fleet.publish(obstacle(uuid="short-1", marked=(2000,), version=1, deadline=1,
+        bus.from_fleet.publish(obstacle(uuid=SHORT1, marked=(2000,), version=1, deadline=1,
                                         rect=(3.0, 0.0, 3.5, 0.5), source="robot_3"))
-        wait_for(lambda: "short-1" in bus.listed(), what="short-1 in the list")
-        wait_for(lambda: "short-1" in bus.expired, timeout=4, what="short-1 on expired_obstacles")
-        wait_for(lambda: "short-1" not in bus.listed(), what="short-1 gone from the list")
+        wait_for(lambda: SHORT1 in bus.listed(), what="short-1 in the list")
+        wait_for(lambda: SHORT1 in bus.expired, timeout=4, what="short-1 on expired_obstacles")
+        wait_for(lambda: SHORT1 not in bus.listed(), what="short-1 gone from the list")
         self.assertEqual(len(bus.fleet), fleet_before)
         # a late message for it does not bring it back
-        bus.from_fleet.publish(obstacle(uuid="short-1", marked=(2001,), version=2, deadline=1,
+        bus.from_fleet.publish(obstacle(uuid=SHORT1, marked=(2001,), version=2, deadline=1,
                                         rect=(3.0, 0.0, 3.5, 0.5), source="robot_4"))
         wait_for(lambda: bus.counter("dropped_expired") == 1, what="dropped_expired = 1")
-        self.assertNotIn("short-1", bus.listed())
+        self.assertNotIn(SHORT1, bus.listed())
         self.assertEqual(bus.counter("expired"), 1)
 
     def test_08_snapshot_file_is_yaml_of_the_current_list(self):
@@ -260,7 +265,7 @@ class TestHandlerNode(unittest.TestCase):
         wait_for(current, what="the snapshot %s to list %s" % (path, sorted(wanted)))
         with open(path) as f:
             doc = yaml.safe_load(f)
-        ext = [o for o in doc["obstacles"] if o["uuid"] == "ext-1"][0]
+        ext = [o for o in doc["obstacles"] if o["uuid"] == EXT1][0]
         self.assertEqual(doc["robot"], "robot_0")
         self.assertEqual(ext["source"], "robot_1")
         self.assertEqual(ext["cells"], [1001, 1002, 1003, 1500])

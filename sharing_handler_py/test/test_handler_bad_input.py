@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from handler_fixtures import GRID, OTHER_GRID, Recorder, proposal, rect, state, update
+from handler_fixtures import U, GRID, OTHER_GRID, Recorder, proposal, rect, state, update
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError
 from sharing_handler_py.logic import DROP_REASONS
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
@@ -14,7 +14,7 @@ def _loaded():
     """A handler holding one own and one external obstacle."""
     r = Recorder(max_cells_per_message=1000)
     r.handler.on_proposal(proposal(cells=(1, 2), rectangle=rect(0, 0, 1, 1)))
-    r.handler.on_external(update("ext-1", marked=(5, 6), version=1, source="robot_1"))
+    r.handler.on_external(update(U("ext-1"), marked=(5, 6), version=1, source="robot_1"))
     return r
 
 
@@ -29,6 +29,18 @@ BAD_EXTERNAL = [
     ("too_many_cells", dict(marked=tuple(range(600)), cleared=tuple(range(600)))),
     ("index_out_of_range", dict(marked=(1, 400 * 200))),
     ("index_out_of_range", dict(cleared=(2 ** 32 - 1,))),
+    # issue 15, failure 4: the handler is as strict as the bridge (sharing_msgs.obstacle_rules)
+    ("malformed", dict(uuid="x")),
+    ("bad_version", dict(version=2 ** 63)),
+    ("bad_version", dict(version=2 ** 53)),
+    ("empty_update", dict(marked=(), cleared=())),
+    ("bad_stamp", dict(stamp=float(2 ** 32))),
+    ("bad_stamp", dict(stamp=-1.0)),
+    ("bad_stamp", dict(stamp=math.nan)),
+    ("malformed", dict(deadline=2 ** 32)),
+    ("rectangle_outside_grid", dict(rectangle=rect(-1e38, -1e38, 1e38, 1e38))),
+    ("non_finite_rectangle", dict(rectangle=rect(-1e39, -5, -9, -4))),
+    ("malformed", dict(source="robot/7")),
     ("geometry_mismatch", dict(geometry=OTHER_GRID)),
     ("geometry_mismatch", dict(geometry=Geometry(0.05, -10.0 + 1e-4, -5.0, 400, 200))),
     ("geometry_mismatch", dict(geometry=Geometry(0.05, -10.0, -5.0, 400, 201))),
@@ -40,7 +52,7 @@ BAD_EXTERNAL = [
 def test_bad_external_message_is_dropped_logged_and_counted(reason, changes, caplog):
     r = _loaded()
     before, sent_layer, sent_fleet = state(r.handler), len(r.layer), len(r.fleet)
-    fields = dict(uuid="ext-1", marked=(7,), cleared=(5,), version=2, source="robot_7")
+    fields = dict(uuid=U("ext-1"), marked=(7,), cleared=(5,), version=2, source="robot_7")
     fields.update(changes)
     with caplog.at_level(logging.DEBUG, logger="sharing_handler_py"):
         assert r.handler.on_external(update(**fields)) is False
@@ -53,14 +65,14 @@ def test_bad_external_message_is_dropped_logged_and_counted(reason, changes, cap
     assert len(drops) == 1 and drops[0].levelno == logging.WARNING
     assert repr(fields["source"]) in drops[0].getMessage() and reason in drops[0].getMessage()
     # the handler keeps working
-    assert r.handler.on_external(update("ext-1", marked=(8,), version=3, source="robot_7"))
-    assert 8 in r.handler.get("ext-1").cells
+    assert r.handler.on_external(update(U("ext-1"), marked=(8,), version=3, source="robot_7"))
+    assert 8 in r.handler.get(U("ext-1")).cells
 
 
 def test_geometry_within_tolerance_is_ours():
     r = _loaded()
     close = Geometry(0.05 * (1 + 5e-7), -10.0 * (1 + 5e-7), -5.0, 400, 200)
-    assert r.handler.on_external(update("ext-2", marked=(1,), version=1, geometry=close))
+    assert r.handler.on_external(update(U("ext-2"), marked=(1,), version=1, geometry=close))
     # resolution travels as float32: 0.05 becomes 0.0500000007..., still the same grid
     import struct
     f32 = struct.unpack("f", struct.pack("f", 0.05))[0]

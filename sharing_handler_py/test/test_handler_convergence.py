@@ -3,12 +3,15 @@ obstacles and cells (DESIGN.md §6). Property tests over random interleavings (h
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from handler_fixtures import Recorder, proposal, rect, state, update
+from handler_fixtures import U, Recorder, proposal, rect, state, update
 
 EXAMPLES = settings(max_examples=500, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 CELLS = st.lists(st.integers(0, 15), max_size=6)
+# (marked, cleared) of one message: never both empty (a message without cells carries nothing and
+# is refused on the fleet channel, see test_handler_bad_input).
+CHANGES = st.tuples(CELLS, CELLS).filter(lambda mc: mc[0] or mc[1])
 RECTANGLES = [rect(0, 0, 1, 1), rect(0.5, 0.5, 1.5, 1.5), rect(3, 3, 4, 4)]
 
 
@@ -18,8 +21,9 @@ def fleet_messages(draw):
     different metadata, as a fleet could produce them."""
     msgs = []
     for _ in range(draw(st.integers(1, 12))):
-        msgs.append(update(uuid=draw(st.sampled_from(["u1", "u2", "u3"])), marked=draw(CELLS),
-                           cleared=draw(CELLS), version=draw(st.integers(1, 4)),
+        marked, cleared = draw(CHANGES)
+        msgs.append(update(uuid=draw(st.sampled_from([U("u1"), U("u2"), U("u3")])), marked=marked,
+                           cleared=cleared, version=draw(st.integers(1, 4)),
                            source=draw(st.sampled_from(["robot_1", "robot_2", "robot_3", "robot_4"])),
                            deadline=draw(st.sampled_from([30, 60])),
                            rectangle=draw(st.sampled_from(RECTANGLES))))
@@ -72,7 +76,8 @@ def test_robots_proposing_updating_and_exchanging_in_any_interleaving_converge(d
             held = data.draw(st.sampled_from(h.obstacles()))
             # the layer usually sends max+1; a stale version exercises the re-stamp guard
             version = held.version + data.draw(st.sampled_from([1, 1, 0, -1]))
-            h.on_internal_update(update(held.uuid, marked=data.draw(CELLS), cleared=data.draw(CELLS),
+            marked, cleared = data.draw(CHANGES)
+            h.on_internal_update(update(held.uuid, marked=marked, cleared=cleared,
                                         version=max(version, 0), source="robot_%d" % i,
                                         deadline=held.deadline, rectangle=held.rectangle))
         elif kind == "deliver" and pending:

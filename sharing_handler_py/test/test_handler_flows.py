@@ -4,7 +4,7 @@ import re
 
 import pytest
 
-from handler_fixtures import GRID, FakeClock, Recorder, proposal, rect, state, update
+from handler_fixtures import U, GRID, FakeClock, Recorder, proposal, rect, state, update
 from sharing_handler_py.errors import InvalidRequestError
 from sharing_handler_py.logic import SharingHandler
 
@@ -45,7 +45,7 @@ def test_overlapping_proposal_is_not_new_and_dropped_with_a_debug_line(caplog):
 
 def test_proposal_overlapping_an_external_obstacle_is_redundant_too():
     r = Recorder()
-    r.handler.on_external(update("ext-1", marked=(5,), version=1, rectangle=rect(0, 0, 2, 2)))
+    r.handler.on_external(update(U("ext-1"), marked=(5,), version=1, rectangle=rect(0, 0, 2, 2)))
     assert r.handler.on_proposal(proposal(rectangle=rect(1.5, 1.5, 4, 4))) is None
     assert r.handler.counters["redundant"] == 1
 
@@ -106,9 +106,35 @@ def test_internal_update_keeps_the_first_rectangle_and_deadline():
     assert sent.rectangle == rect(0, 0, 1, 1) and sent.deadline == 60
 
 
+def test_internal_update_carries_the_lifetime_left_when_it_is_sent():
+    """A robot that missed the first share adds the obstacle from an update: it must not keep
+    it longer than the robot that shared it (issue 15, item 2)."""
+    r = Recorder(duration=60)
+    shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    r.clock.now += 25.4
+    sent = r.handler.on_internal_update(update(shared.uuid, marked=(1,), version=2, source="robot_0",
+                                               deadline=60))
+    assert sent.deadline == 34  # 34.6 s left, rounded down
+    late = Recorder("robot_1", clock=r.clock)
+    late.handler.on_external(sent)
+    assert late.handler.get(shared.uuid).remaining <= r.handler.get(shared.uuid).remaining
+
+
+def test_a_later_copy_can_bring_expiry_closer_but_never_push_it_back():
+    r = Recorder(duration=60)
+    r.handler.on_external(update(U("a"), marked=(1,), version=1, deadline=30))   # expires at 130
+    r.clock.now += 10
+    r.handler.on_external(update(U("a"), marked=(2,), version=2, deadline=50))   # would be 160
+    assert r.handler.get(U("a")).remaining == pytest.approx(20.0)
+    r.handler.on_external(update(U("a"), marked=(3,), version=3, deadline=5))    # 115: sooner
+    assert r.handler.get(U("a")).remaining == pytest.approx(5.0)
+    r.clock.now += 5
+    assert r.handler.expire() == [U("a")]
+
+
 def test_internal_update_for_an_unknown_uuid_is_dropped():
     r = Recorder()
-    assert r.handler.on_internal_update(update("nope", marked=(1,), source="robot_0")) is None
+    assert r.handler.on_internal_update(update(U("nope"), marked=(1,), source="robot_0")) is None
     assert r.fleet == [] and r.handler.counters["dropped_unknown_uuid"] == 1
 
 
@@ -117,9 +143,9 @@ def test_internal_update_for_an_unknown_uuid_is_dropped():
 def test_external_unknown_uuid_is_added_with_its_deadline_and_local_arrival_and_not_echoed():
     r = Recorder(duration=60)
     r.clock.now = 250.0
-    msg = update("ext-1", marked=(3, 1, 2), version=1, source="robot_1", deadline=17)
+    msg = update(U("ext-1"), marked=(3, 1, 2), version=1, source="robot_1", deadline=17)
     assert r.handler.on_external(msg) is True
-    held = r.handler.get("ext-1")
+    held = r.handler.get(U("ext-1"))
     assert (held.cells, held.deadline, held.arrival, held.source) == ((1, 2, 3), 17, 250.0, "robot_1")
     assert r.layer == [msg] and r.fleet == []
     assert r.handler.counters["updates_in"] == 1
@@ -127,49 +153,49 @@ def test_external_unknown_uuid_is_added_with_its_deadline_and_local_arrival_and_
 
 def test_external_update_appends_marked_without_duplicates_then_removes_cleared():
     r = Recorder()
-    r.handler.on_external(update("ext-1", marked=(1, 2, 3), version=1, source="robot_1"))
-    second = update("ext-1", marked=(3, 4, 5, 5), cleared=(1, 5), version=2, source="robot_2")
+    r.handler.on_external(update(U("ext-1"), marked=(1, 2, 3), version=1, source="robot_1"))
+    second = update(U("ext-1"), marked=(3, 4, 5, 5), cleared=(1, 5), version=2, source="robot_2")
     r.handler.on_external(second)
-    assert r.handler.get("ext-1").cells == (2, 3, 4)
+    assert r.handler.get(U("ext-1")).cells == (2, 3, 4)
     assert r.layer[-1] is second and r.fleet == []
 
 
 def test_older_update_arriving_late_cannot_undo_a_newer_one():
     r = Recorder()
-    r.handler.on_external(update("ext-1", marked=(1,), version=1, source="robot_1"))
-    r.handler.on_external(update("ext-1", cleared=(1,), version=3, source="robot_2"))
-    r.handler.on_external(update("ext-1", marked=(1,), version=2, source="robot_1"))
-    assert r.handler.get("ext-1").cells == ()
-    assert r.handler.get("ext-1").version == 3
+    r.handler.on_external(update(U("ext-1"), marked=(1,), version=1, source="robot_1"))
+    r.handler.on_external(update(U("ext-1"), cleared=(1,), version=3, source="robot_2"))
+    r.handler.on_external(update(U("ext-1"), marked=(1,), version=2, source="robot_1"))
+    assert r.handler.get(U("ext-1")).cells == ()
+    assert r.handler.get(U("ext-1")).version == 3
 
 
 def test_the_first_share_defines_rectangle_deadline_and_source_even_when_it_arrives_late():
     r = Recorder()
-    r.handler.on_external(update("ext-1", marked=(1,), version=3, source="robot_2", deadline=90,
-                                 rectangle=rect(0, 0, 9, 9)))
-    r.handler.on_external(update("ext-1", marked=(2,), version=1, source="robot_1", deadline=30,
+    r.handler.on_external(update(U("ext-1"), marked=(1,), version=3, source="robot_2", deadline=90,
+                                 rectangle=rect(0, 0, 9, 4.5)))
+    r.handler.on_external(update(U("ext-1"), marked=(2,), version=1, source="robot_1", deadline=30,
                                  rectangle=rect(0, 0, 1, 1)))
-    held = r.handler.get("ext-1")
+    held = r.handler.get(U("ext-1"))
     assert (held.source, held.deadline, held.rectangle, held.version) == \
         ("robot_1", 30, rect(0, 0, 1, 1), 3)
 
 
 def test_fleet_messages_wait_for_the_grid_and_are_applied_when_the_map_arrives():
     r = Recorder(geometry=None)
-    assert r.handler.on_external(update("ext-1", marked=(1,), version=1)) is False
+    assert r.handler.on_external(update(U("ext-1"), marked=(1,), version=1)) is False
     assert r.handler.counters["deferred"] == 1 and len(r.handler) == 0
     r.handler.set_geometry(GRID)
-    assert r.handler.get("ext-1").cells == (1,)
+    assert r.handler.get(U("ext-1")).cells == (1,)
     assert len(r.layer) == 1
 
 
 def test_waiting_queue_is_bounded():
     r = Recorder(geometry=None, max_deferred=2)
     for i in range(3):
-        r.handler.on_external(update("ext-%d" % i, marked=(1,), version=1))
+        r.handler.on_external(update(U("ext-%d" % i), marked=(1,), version=1))
     assert r.handler.counters["dropped_no_geometry"] == 1
     r.handler.set_geometry(GRID)
-    assert [h.uuid for h in r.handler.obstacles()] == ["ext-0", "ext-1"]
+    assert [h.uuid for h in r.handler.obstacles()] == [U("ext-0"), U("ext-1")]
 
 
 # ---------------------------------------------------------------- expiry
@@ -190,27 +216,27 @@ def test_obstacle_expires_exactly_at_deadline_after_local_arrival_without_any_fl
 def test_external_obstacle_expires_by_its_own_deadline_counted_from_local_arrival():
     r = Recorder(duration=60)
     r.clock.now = 500.0
-    r.handler.on_external(update("ext-1", marked=(1,), version=1, deadline=5))
+    r.handler.on_external(update(U("ext-1"), marked=(1,), version=1, deadline=5))
     r.clock.now = 504.0
     assert r.handler.expire() == []
     r.clock.now = 505.0
-    assert r.handler.expire() == ["ext-1"]
+    assert r.handler.expire() == [U("ext-1")]
 
 
 def test_late_message_for_an_expired_obstacle_does_not_resurrect_it_until_the_tombstone_ends():
     r = Recorder(duration=60)
-    r.handler.on_external(update("ext-1", marked=(1,), version=1, deadline=5))
+    r.handler.on_external(update(U("ext-1"), marked=(1,), version=1, deadline=5))
     r.clock.now += 5
     r.handler.expire()
-    assert r.handler.on_external(update("ext-1", marked=(2,), version=2)) is False
+    assert r.handler.on_external(update(U("ext-1"), marked=(2,), version=2)) is False
     assert len(r.handler) == 0 and r.handler.counters["dropped_expired"] == 1
-    assert r.handler.is_tombstoned("ext-1")
+    assert r.handler.is_tombstoned(U("ext-1"))
     r.clock.now += 59.9
     r.handler.expire()
-    assert r.handler.is_tombstoned("ext-1"), "remembered for at least obstacle_duration"
+    assert r.handler.is_tombstoned(U("ext-1")), "remembered for at least obstacle_duration"
     r.clock.now += 0.1
     r.handler.expire()
-    assert not r.handler.is_tombstoned("ext-1")
+    assert not r.handler.is_tombstoned(U("ext-1"))
 
 
 def test_internal_update_for_an_expired_obstacle_is_dropped():
@@ -239,7 +265,12 @@ def test_manual_add_with_cells_and_deadline():
 
 
 @pytest.mark.parametrize("kwargs,why", [
-    (dict(rectangle=[100, 100, 101, 101]), "covers no cell"),
+    (dict(rectangle=[100, 100, 101, 101]), "not inside the grid"),
+    (dict(rectangle=[-1e38, -1e38, 1e38, 1e38]), "not inside the grid"),      # failure 3 of issue 15
+    (dict(rectangle=[-1e39, -1e39, -9, -4]), "non_finite_rectangle"),       # not even a float32
+    (dict(rectangle=[-10, -5, 10, 5]), "max_obstacle_extent"),             # the whole 20 m x 10 m map
+    (dict(rectangle=[0.001, 0.001, 0.002, 0.002]), "covers no cell"),
+    (dict(rectangle=[0, 0, 1, 1], deadline=2 ** 32), "deadline"),
     (dict(rectangle=[0, 0, 1]), "4"),
     (dict(rectangle=[0, 0, 1, 1], marked=(400 * 200,)), "index_out_of_range"),
     (dict(rectangle=[-10, -5, -9, -4]), "overlaps"),
@@ -252,6 +283,18 @@ def test_manual_add_refusals_say_why(kwargs, why):
     assert len(r.handler) == 1
 
 
+def test_manual_add_is_stamped_with_the_time_it_was_made():
+    r = Recorder()
+    r.clock.now = 1234.5
+    shared = r.handler.add_manual([0, 0, 1, 1])
+    assert shared.stamp == 1234.5 and r.fleet[-1].stamp == 1234.5
+
+
+def test_manual_add_within_max_obstacle_extent_is_accepted():
+    r = Recorder(max_obstacle_extent=20.0)
+    assert r.handler.add_manual([-10, -5, 10, 5]).marked
+
+
 def test_manual_add_without_a_grid_is_refused():
     with pytest.raises(InvalidRequestError, match="no map"):
         Recorder(geometry=None).handler.add_manual([0, 0, 1, 1])
@@ -259,21 +302,21 @@ def test_manual_add_without_a_grid_is_refused():
 
 def test_list_holds_full_state_sorted_by_uuid_with_remaining_time():
     r = Recorder(duration=60)
-    r.handler.on_external(update("b", marked=(2,), version=4, deadline=30, source="robot_2"))
-    r.handler.on_external(update("a", marked=(5, 1), cleared=(9,), version=1, deadline=10,
+    r.handler.on_external(update(U("b"), marked=(2,), version=4, deadline=30, source="robot_2"))
+    r.handler.on_external(update(U("a"), marked=(5, 1), cleared=(9,), version=1, deadline=10,
                                  source="robot_1"))
     r.clock.now += 2.5
     held = r.handler.obstacles()
-    assert [h.uuid for h in held] == ["a", "b"]
+    assert [h.uuid for h in held] == [U("a"), U("b")]
     full = held[0].to_obstacle()
     assert (full.marked, full.cleared, full.deadline, full.version, full.source) == \
-        ((1, 5), (), 8, 1, "robot_1")
+        ((1, 5), (), 7, 1, "robot_1")  # 7.5 s left: rounded down, a copy must not outlive it
     assert held[0].remaining == pytest.approx(7.5)
 
 
 def test_list_deadline_is_at_least_one_second():
     r = Recorder()
-    r.handler.on_external(update("a", marked=(1,), version=1, deadline=3))
+    r.handler.on_external(update(U("a"), marked=(1,), version=1, deadline=3))
     r.clock.now += 2.99999
     assert r.handler.obstacles()[0].to_obstacle().deadline == 1
 
@@ -287,8 +330,8 @@ def test_handler_rejects_bad_construction_arguments():
 
 def test_same_messages_same_state_and_duplicates_change_nothing():
     a, b = Recorder("observer_a"), Recorder("observer_b")
-    msgs = [update("x", marked=(1, 2), version=1, source="robot_1"),
-            update("x", marked=(3,), cleared=(1,), version=2, source="robot_2")]
+    msgs = [update(U("x"), marked=(1, 2), version=1, source="robot_1"),
+            update(U("x"), marked=(3,), cleared=(1,), version=2, source="robot_2")]
     for m in msgs + msgs:
         a.handler.on_external(m)
     changes = a.changes
@@ -298,3 +341,12 @@ def test_same_messages_same_state_and_duplicates_change_nothing():
     for m in reversed(msgs):
         b.handler.on_external(m)
     assert state(a.handler) == state(b.handler)
+
+
+def test_after_a_restart_own_obstacles_are_accepted_back_from_peers_but_echoes_of_held_ones_are_not():
+    r = Recorder("robot_0")
+    mine = update(U("mine"), marked=(3,), version=2, source="robot_0")
+    assert r.handler.on_external(mine)                    # not held: a peer gives it back
+    assert r.handler.get(U("mine")).cells == (3,)
+    assert r.handler.on_external(mine.replace(version=3, marked=(4,))) is False  # held: an echo
+    assert r.handler.counters["dropped_own_source"] == 1

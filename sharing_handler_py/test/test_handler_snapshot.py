@@ -4,19 +4,19 @@ import os
 import pytest
 import yaml
 
-from handler_fixtures import Recorder, proposal, rect, update
+from handler_fixtures import U, Recorder, proposal, rect, update
 from sharing_handler_py import snapshot
 
 
 def test_snapshot_lists_every_obstacle_with_its_cells_and_times():
     r = Recorder(duration=60, uuids="r0")
     shared = r.handler.on_proposal(proposal(cells=(12, 10), rectangle=rect(0, 0, 1, 1)))
-    r.handler.on_external(update("ext-1", marked=(5, 3), version=2, source="robot_1", deadline=30))
+    r.handler.on_external(update(U("ext-1"), marked=(5, 3), version=2, source="robot_1", deadline=30))
     r.clock.now += 10
     doc = yaml.safe_load(snapshot.render("robot_0", r.clock.now, r.handler.obstacles()))
     assert doc["robot"] == "robot_0" and doc["count"] == 2
     by_uuid = {o["uuid"]: o for o in doc["obstacles"]}
-    assert by_uuid["ext-1"]["cells"] == [3, 5] and by_uuid["ext-1"]["remaining_s"] == 20.0
+    assert by_uuid[U("ext-1")]["cells"] == [3, 5] and by_uuid[U("ext-1")]["remaining_s"] == 20.0
     assert by_uuid[shared.uuid]["source"] == "robot_0"
     assert by_uuid[shared.uuid]["rectangle"] == [0.0, 0.0, 1.0, 1.0]
     assert by_uuid[shared.uuid]["grid"]["size"] == [400, 200]

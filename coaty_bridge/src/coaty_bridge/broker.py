@@ -23,6 +23,16 @@ def free_port(host="127.0.0.1"):
         return sock.getsockname()[1]
 
 
+def _keep_user():
+    """mosquitto started as root switches to the user 'mosquitto', which cannot read our private
+    temporary files (log, password file, ACL, TLS keys: all 0600/0700). A private test broker
+    stays the user that started it."""
+    if os.geteuid() != 0:
+        return ""
+    import pwd
+    return "user %s\n" % pwd.getpwuid(os.geteuid()).pw_name
+
+
 class BrokerError(RuntimeError):
     """mosquitto could not be started."""
 
@@ -75,9 +85,10 @@ class Broker:
                           "log_type error\nlog_type warning\nlog_type notice\n"
                           "per_listener_settings false\n"
                           "set_tcp_nodelay true\n"
+                          "%s"
                           "allow_anonymous %s\n"
                           "listener %d %s\n"
-                          % (self.log_path, "true" if self.allow_anonymous else "false",
+                          % (self.log_path, _keep_user(), "true" if self.allow_anonymous else "false",
                              self.port, self.host))
                 for line in self.extra_config:
                     out.write(line + "\n")

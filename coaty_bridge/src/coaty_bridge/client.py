@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 
 import paho.mqtt.client as mqtt
 
-from coaty_bridge import codec
-from coaty_bridge.errors import CoatyError
+from coaty_bridge import codec, lifetimes
+from coaty_bridge.errors import CoatyError, ForgedSourceError
+from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
 
 LOG = logging.getLogger(__name__)
@@ -73,6 +74,7 @@ class BridgeConfig:
     reconnect_min_delay: float = 0.5
     reconnect_max_delay: float = 30.0
     discover_window: float = 30.0
+    authenticate_sources: bool = False
     address: BrokerAddress = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -85,13 +87,25 @@ class BridgeConfig:
                 fail(name, err)
         if self.object_type.startswith("coaty."):
             fail("object_type", "the coaty.* object types are reserved")
+        if not isinstance(self.authenticate_sources, bool):
+            fail("authenticate_sources", "must be true or false")
         if self.identity_id:
             try:
                 object.__setattr__(self, "identity_id", check_uuid(self.identity_id, "identity_id"))
             except CoatyError as err:
                 fail("identity_id", err)
+            if self.authenticate_sources and self.identity_id != identity_for(self.namespace, self.robot_name):
+                fail("identity_id", "with authenticate_sources the identity must be the one derived "
+                                    "from the name, %s" % identity_for(self.namespace, self.robot_name))
+        elif self.authenticate_sources:
+            # the broker's ACL and every receiver bind this id to the robot's name
+            object.__setattr__(self, "identity_id", identity_for(self.namespace, self.robot_name))
         else:
             object.__setattr__(self, "identity_id", new_uuid())
+        if self.authenticate_sources and not self.username:
+            # the ACL's %u is the sourceId: log in as the identity (a TLS broker with
+            # use_identity_as_username takes it from the certificate's CN instead)
+            object.__setattr__(self, "username", self.identity_id)
         try:
             object.__setattr__(self, "address", parse_broker_url(self.broker_url))
         except ValueError as err:
@@ -132,6 +146,10 @@ def _make_paho_client(client_id):
     return mqtt.Client(client_id=client_id, clean_session=True)
 
 
+#: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
+OWN_LOG_PER_OBSTACLE = 200
+
+
 class CoatyBridgeClient:
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
@@ -146,6 +164,11 @@ class CoatyBridgeClient:
         self._counters = collections.Counter()
         self._queue = collections.deque()
         self._current = ()
+        self._current_as_of = 0.0   # clock time at which the deadlines in _current were valid
+        # uuid -> [(update, sent_at)]: this robot's own updates of live obstacles, replayed to a
+        # Discover so a robot back from a partition or restart gets every cell's exact stamp
+        # (a full-state entry alone cannot carry a clear; see README "Partitions and restarts")
+        self._own_log = collections.OrderedDict()
         self._pending_discovers = {}
         self._connected = False
         self._ever_connected = False
@@ -205,6 +228,10 @@ class CoatyBridgeClient:
         if sock is not None:
             sock.close()
 
+    def clock(self):
+        """The client's clock (monotonic seconds unless injected)."""
+        return self._clock()
+
     @property
     def connected(self):
         return self._connected
@@ -225,8 +252,7 @@ class CoatyBridgeClient:
     def publish_obstacle(self, update):
         """Publishes one internal ObstacleUpdate to the fleet (Advertise). Returns
         False if it was dropped (too large); queues it while offline."""
-        payload = codec.advertise_payload(
-            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+        payload = self._obstacle_payload(update)
         if len(payload) > self.config.max_payload_bytes:
             self._count("dropped_outgoing.oversized")
             LOG.warning("%s: obstacle %s v%d not published: %d bytes exceed max_payload_bytes %d",
@@ -235,16 +261,48 @@ class CoatyBridgeClient:
             return False
         self._count("published")
         self._count("bytes_published", len(payload))
-        self._send(self._obstacle_topic, payload)
+        self._log_own(update)
+        self._send(self._obstacle_topic, payload, update=update)
         return True
 
-    def set_current_obstacles(self, updates):
-        """The robot's current full obstacles, used to answer obstacle Discovers."""
+    def _log_own(self, update):
+        with self._lock:
+            entries = self._own_log.setdefault(update.uuid, [])
+            entries.append((update, self._clock()))
+            if len(entries) > OWN_LOG_PER_OBSTACLE:
+                del entries[0]
+                self._counters["own_log_truncated"] += 1
+
+    def _replayable_own_updates(self):
+        """This robot's own updates still alive, aged to now; expired ones are forgotten."""
+        now = self._clock()
+        replay = []
+        with self._lock:
+            for uuid in list(self._own_log):
+                alive = [(u, t) for u, t in self._own_log[uuid] if lifetimes.aged(u, now - t) is not None]
+                if alive:
+                    self._own_log[uuid] = alive
+                    replay += [lifetimes.aged(u, now - t) for u, t in alive]
+                else:
+                    del self._own_log[uuid]
+        return replay
+
+    def _obstacle_payload(self, update):
+        return codec.advertise_payload(
+            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+
+    def set_current_obstacles(self, updates, as_of=None):
+        """The robot's current full obstacles, used to answer obstacle Discovers; their
+        deadlines were valid at clock time `as_of` (default: now) and are aged from there."""
         current = tuple(updates)
+        as_of = self._clock() if as_of is None else as_of
         with self._lock:
             self._current = current
+            self._current_as_of = as_of
 
-    def _send(self, topic, payload, queue=True):
+    def _send(self, topic, payload, queue=True, update=None, queued_at=None):
+        """Publishes now, or (``queue``) keeps it while offline. An obstacle ``update`` is kept
+        with the time it was queued, so its deadline is aged when it finally goes out."""
         with self._lock:
             if self._connected:
                 info = self._mqtt.publish(topic, payload, qos=self._qos)
@@ -258,13 +316,25 @@ class CoatyBridgeClient:
                     self._queue.popleft()  # the newest update is worth more than the oldest
                 else:
                     return
-            self._queue.append((topic, payload))
+            self._queue.append((topic, payload, update, self._clock() if queued_at is None else queued_at))
 
     def _flush_queue(self):
         with self._lock:
             pending, self._queue = list(self._queue), collections.deque()
-        for topic, payload in pending:
-            self._send(topic, payload)
+        now = self._clock()
+        for topic, payload, update, queued_at in pending:
+            if update is not None:
+                fresh = lifetimes.aged(update, now - queued_at)
+                if fresh is None:
+                    # it expired on every robot while we were offline: sending it would revive it
+                    self._count("queue_expired")
+                    continue
+                if fresh is not update:
+                    payload = self._obstacle_payload(fresh)
+                # its deadline is now valid as of now (should the send fail and re-queue it)
+                self._send(topic, payload, update=fresh, queued_at=now)
+            else:
+                self._send(topic, payload)
 
     def _discover_obstacles(self):
         correlation_id = new_uuid()
@@ -366,6 +436,17 @@ class CoatyBridgeClient:
                     str(topic_text)[:120], err, excerpt)
 
     def _deliver(self, update, topic):
+        if self.config.authenticate_sources:
+            expected = identity_for(self.config.namespace, update.source)
+            if topic.source_id != expected:
+                # Only the robot itself may speak for it: an update or clear of another robot's
+                # obstacle is fine, but under the sender's own name (and the broker's ACL makes
+                # sure the sender's sourceId is its own).
+                self._drop(ForgedSourceError(
+                    "obstacle %s v%d claims source %r (identity %s) but was sent by %s"
+                    % (update.uuid, update.version, update.source, expected, topic.source_id)),
+                    str(topic), b"")
+                return
         self._count("received")
         try:
             self._on_obstacle(update, topic)
@@ -382,9 +463,22 @@ class CoatyBridgeClient:
             self._send(reply, codec.resolve_payload(self._identity), queue=False)
             self._count("resolves_sent")
         if request.obstacles:
+            for update in self._replayable_own_updates():
+                payload = codec.resolve_payload(
+                    codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+                if len(payload) <= self.config.max_payload_bytes:
+                    self._send(reply, payload, queue=False)
+                    self._count("resolves_sent")
             with self._lock:
-                current = self._current
+                current, as_of = self._current, self._current_as_of
+            elapsed = self._clock() - as_of
             for update in current:
+                # the list's deadlines were valid at as_of: age them to now (a copy made from
+                # a Resolve must not outlive the original)
+                update = lifetimes.aged(update, elapsed)
+                if update is None:
+                    self._count("resolve_skipped_expired")
+                    continue
                 payload = codec.resolve_payload(
                     codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
                 if len(payload) <= self.config.max_payload_bytes:

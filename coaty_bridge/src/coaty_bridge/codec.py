@@ -23,14 +23,16 @@ from coaty_bridge import compact
 from coaty_bridge.errors import (CoatyError, InvalidJsonError, InvalidPayloadError, MissingFieldError,
                                  NonFiniteNumberError, OutOfRangeError, PayloadTooLargeError,
                                  TooManyIndexesError, WrongTypeError)
-from coaty_bridge.topics import check_name, check_uuid, _UUID_RE
+from coaty_bridge.topics import check_uuid, _UUID_RE
+from coaty_bridge.errors import InvalidNameError
+from sharing_msgs import obstacle_rules
 
 IDENTITY_OBJECT_TYPE = "coaty.Identity"
 IDENTITY_CORE_TYPE = "Identity"
 DEFAULT_OBJECT_TYPE = "org.fleetsharing.SharedObstacle"
-MAX_SAFE_INTEGER = 2 ** 53 - 1  # largest integer a JS number holds exactly
-MAX_UINT32 = 2 ** 32 - 1
-MAX_TEXT = 256
+MAX_SAFE_INTEGER = obstacle_rules.MAX_VERSION  # largest integer a JS number holds exactly
+MAX_UINT32 = obstacle_rules.MAX_UINT32
+MAX_TEXT = obstacle_rules.MAX_TEXT
 
 
 @dataclass(frozen=True)
@@ -70,54 +72,36 @@ class ObstacleUpdate:
     cleared: Tuple[int, ...] = ()
 
     def __post_init__(self):
-        if not _is_uuid(self.uuid):
-            raise OutOfRangeError("obstacle uuid %r is not a UUID" % (self.uuid,))
+        # The one validation shared with the handler (sharing_msgs.obstacle_rules): whatever
+        # passes here also passes the handler's from_fleet check and serialises as a ROS message.
+        try:
+            obstacle_rules.check_fleet(
+                self.uuid, self.source, self.version, self.stamp, self.frame_id, self.deadline,
+                self.rectangle, self.resolution, self.origin_x, self.origin_y, self.size_x,
+                self.size_y, self.marked, self.cleared)
+        except obstacle_rules.ObstacleFieldError as err:
+            raise _bridge_error(err) from None
         object.__setattr__(self, "uuid", self.uuid.lower())
-        check_name(self.source, "source")
-        if len(self.source) > MAX_TEXT:
-            raise OutOfRangeError("source %r... longer than %d characters" % (self.source[:40], MAX_TEXT))
-        _check_int("version", self.version, 1, MAX_SAFE_INTEGER)
-        _check_int("deadline", self.deadline, 0, MAX_UINT32)
-        _check_int("size_x", self.size_x, 1, MAX_UINT32)
-        _check_int("size_y", self.size_y, 1, MAX_UINT32)
-        if self.size_x * self.size_y > MAX_UINT32 + 1:
-            raise OutOfRangeError("grid %d x %d has more cells than a uint32 index can address"
-                                  % (self.size_x, self.size_y))
-        for name in ("stamp", "resolution", "origin_x", "origin_y"):
-            _check_float(name, getattr(self, name))
-        if self.stamp < 0:
-            raise OutOfRangeError("stamp %r is negative" % (self.stamp,))
-        if not self.resolution > 0:
-            raise OutOfRangeError("resolution %r is not positive" % (self.resolution,))
-        if not isinstance(self.frame_id, str) or len(self.frame_id) > MAX_TEXT or "\0" in self.frame_id:
-            raise WrongTypeError("frame_id %r is not a short string" % (str(self.frame_id)[:40],))
-        rect = tuple(self.rectangle)
-        if len(rect) != 4:
-            raise OutOfRangeError("rectangle %r does not have 4 values" % (rect[:8],))
-        for value in rect:
-            _check_float("rectangle", value)
-        if rect[0] > rect[2] or rect[1] > rect[3]:
-            raise OutOfRangeError("rectangle %r has min > max" % (rect,))
-        object.__setattr__(self, "rectangle", tuple(float(v) for v in rect))
-        cells = self.size_x * self.size_y
+        object.__setattr__(self, "rectangle", tuple(float(v) for v in self.rectangle))
         for name in ("marked", "cleared"):
-            values = getattr(self, name)
-            for value in values:
-                if isinstance(value, bool) or not isinstance(value, int):
-                    raise WrongTypeError("%s index %r is not an integer" % (name, value))
-                if not 0 <= value < cells:
-                    raise OutOfRangeError("%s index %r outside the %d x %d grid"
-                                          % (name, value, self.size_x, self.size_y))
-            if len(values) > cells:
-                raise TooManyIndexesError("%d %s indexes for a grid of %d cells" % (len(values), name, cells))
-            object.__setattr__(self, name, tuple(sorted(set(values))))
+            object.__setattr__(self, name, tuple(sorted(set(getattr(self, name)))))
 
 
-def _check_int(name, value, low, high):
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise WrongTypeError("%s %r is not an integer" % (name, value))
-    if not low <= value <= high:
-        raise OutOfRangeError("%s %r outside %d..%d" % (name, value, low, high))
+_ERROR_BY_KIND = {
+    obstacle_rules.WRONG_TYPE: WrongTypeError,
+    obstacle_rules.NON_FINITE: NonFiniteNumberError,
+    obstacle_rules.OUT_OF_RANGE: OutOfRangeError,
+    obstacle_rules.EMPTY: OutOfRangeError,
+    obstacle_rules.OUTSIDE_GRID: OutOfRangeError,
+    obstacle_rules.TOO_MANY: TooManyIndexesError,
+}
+
+
+def _bridge_error(err):
+    """ObstacleFieldError -> the bridge's error class (its drop counter)."""
+    if err.field == "source" and err.kind != obstacle_rules.WRONG_TYPE:
+        return InvalidNameError("source: %s" % err)
+    return _ERROR_BY_KIND.get(err.kind, InvalidPayloadError)(str(err))
 
 
 def _check_float(name, value):

@@ -65,3 +65,8 @@ class OutOfRangeError(InvalidPayloadError):
 class TooManyIndexesError(InvalidPayloadError):
     """An index array is longer than the grid or the configured maximum."""
     reason = "too_many_indexes"
+
+
+class ForgedSourceError(InvalidPayloadError):
+    """An obstacle whose ``source`` is not the robot that sent it (authenticate_sources)."""
+    reason = "forged_source"

@@ -12,6 +12,8 @@ import threading
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs import safe_publisher
+from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.codec import ObstacleUpdate
@@ -23,7 +25,7 @@ LOG = logging.getLogger(__name__)
 _PARAMS = ("broker_url", "namespace", "object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
-           "reconnect_max_delay", "discover_window")
+           "reconnect_max_delay", "discover_window", "authenticate_sources")
 
 
 def msg_to_update(msg):
@@ -115,7 +117,10 @@ class BridgeNode:
         self.config = config
         self._lock = threading.Lock()
         self._counters = {}
-        self.from_fleet = rospy.Publisher("from_fleet", SharedObstacle, queue_size=100)
+        # A message that cannot be delivered is dropped there; the publisher stays usable.
+        self.from_fleet = SafePublisher(
+            lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
+            topic="%s/from_fleet" % config.robot_name)
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle)
         rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
@@ -147,7 +152,14 @@ class BridgeNode:
             self._counters[key] = self._counters.get(key, 0) + 1
 
     def _on_fleet_obstacle(self, update, topic):
-        self.from_fleet.publish(update_to_msg(update))
+        what = "%s: obstacle %s v%d from %s (sourceId %s)" % (
+            self.config.robot_name, update.uuid, update.version, update.source, topic.source_id)
+        try:
+            msg = update_to_msg(update)
+        except Exception as err:  # noqa: BLE001 - one bad value must not stop delivery
+            self.from_fleet.drop("conversion", what, err)
+            return
+        self.from_fleet.publish(msg, what)
 
     def _on_to_fleet(self, msg):
         try:
@@ -169,13 +181,26 @@ class BridgeNode:
     def _on_obstacle_list(self, msg):
         updates = []
         for item in msg.obstacles:
+            if not item.marked_indexes:
+                # An obstacle emptied by raytracing draws nothing on a late joiner; a fleet
+                # message without cells is refused by every receiver anyway.
+                continue
             try:
                 updates.append(msg_to_update(item))
             except ValueError as err:
                 self._count("dropped_list_item")
                 rospy.logwarn("%s: shared_obstacle_list item %r skipped: %s", self.config.robot_name,
                               item.uuid[:40], err)
-        self.client.set_current_obstacles(updates)
+        self.client.set_current_obstacles(updates, as_of=self._list_as_of(msg.header.stamp))
+
+    def _list_as_of(self, stamp):
+        """Client-clock time at which the list's deadlines were valid. The handler ages them to
+        header.stamp (ROS time); a latched list can be old when it reaches a bridge that started
+        later, so its age is taken off. A zero stamp (unknown) counts as now."""
+        age = 0.0
+        if not stamp.is_zero():
+            age = max(0.0, rospy.get_time() - stamp.to_sec())
+        return self.client.clock() - age
 
     def _publish_diagnostics(self, _event=None):
         counters = self.client.counters()
@@ -184,7 +209,19 @@ class BridgeNode:
         status = DiagnosticStatus()
         status.name = "coaty_bridge: %s" % self.config.robot_name
         status.hardware_id = self.client.identity_id
-        if self.client.connected:
+        level, problem, errors = self.from_fleet.report()
+        delivery = dict(("delivery_error." + reason, n) for reason, n in errors.items())
+        counters.update(delivery)
+        counters["delivered"] = self.from_fleet.delivered
+        counters["publishers_repaired"] = self.from_fleet.repaired
+        counters["publishers_recreated"] = self.from_fleet.recreated
+        if level == safe_publisher.ERROR:
+            status.level = DiagnosticStatus.ERROR
+            status.message = problem
+        elif level == safe_publisher.WARN:
+            status.level = DiagnosticStatus.WARN
+            status.message = problem
+        elif self.client.connected:
             status.level = DiagnosticStatus.OK
             status.message = "connected to %s" % self.config.broker_url
         else:
@@ -201,9 +238,10 @@ def main():
     rospy.init_node("coaty_bridge")
     handler = RosoutHandler()
     handler.setFormatter(logging.Formatter("%(message)s"))
-    package_logger = logging.getLogger("coaty_bridge")
-    package_logger.addHandler(handler)
-    package_logger.setLevel(logging.INFO)
+    for name in ("coaty_bridge", "sharing_msgs"):
+        package_logger = logging.getLogger(name)
+        package_logger.addHandler(handler)
+        package_logger.setLevel(logging.INFO)
     try:
         config = read_config()
         subscriber_wait = rospy.get_param("~subscriber_wait", 10.0)

@@ -19,8 +19,9 @@ from dataclasses import dataclass
 from typing import Tuple
 
 from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
-from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_indexes,
-                                           check_uuid)
+from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
+                                           check_indexes, check_message_values, check_uuid)
+from sharing_msgs import obstacle_rules
 
 _log = logging.getLogger(__name__)
 
@@ -40,6 +41,9 @@ DROP_REASONS = (
     "expired",              # a message for an obstacle that expired here (tombstone)
     "unknown_uuid",         # an internal update for an obstacle the handler does not hold
     "empty_proposal",       # a proposal without marked cells
+    "bad_stamp",            # a header stamp outside the ROS time range (or not finite)
+    "rectangle_outside_grid",  # a rectangle reaching beyond the grid it names
+    "empty_update",         # a fleet message without any marked or cleared cell
 )
 
 #: Counters besides the drops.
@@ -54,21 +58,30 @@ class HeldObstacle:
     uuid: str
     source: str            # the robot that first shared it
     version: int           # the greatest version seen
-    deadline: int          # seconds after local arrival
+    deadline: int          # seconds, as in the message that defines the metadata (first share)
     rectangle: Rectangle
     geometry: Geometry
     frame_id: str
     cells: Tuple[int, ...]  # present cells, sorted
     arrival: float         # local arrival time (clock seconds)
-    remaining: float       # seconds left at the time of the listing
+    remaining: float       # seconds left at the time of the listing (expiry - now)
 
     def to_obstacle(self):
         """Full-state message: cells marked, nothing cleared, deadline = remaining seconds
-        rounded up (at least 1)."""
+        rounded down (at least 1), so a copy made from it never outlives this one by more
+        than a second."""
         return Obstacle(uuid=self.uuid, marked=self.cells, cleared=(),
-                        deadline=max(1, int(math.ceil(self.remaining))), rectangle=self.rectangle,
+                        deadline=remaining_deadline(self.remaining), rectangle=self.rectangle,
                         source=self.source, geometry=self.geometry, version=self.version,
                         frame_id=self.frame_id)
+
+
+def remaining_deadline(remaining):
+    """Seconds left -> the deadline a message carries: whole seconds rounded down (a copy must
+    not outlive the original), at least 1 (0 would be refused as expiring on arrival)."""
+    if not math.isfinite(remaining):
+        return 1
+    return int(min(obstacle_rules.MAX_UINT32, max(1, math.floor(remaining))))
 
 
 def _meta_key(obstacle):
@@ -82,7 +95,7 @@ class _Entry:
     """Mutable state of one held obstacle."""
 
     __slots__ = ("uuid", "source", "rectangle", "deadline", "geometry", "frame_id", "arrival",
-                 "first_key", "max_version", "stamps", "present", "sorted_cells")
+                 "expires_at", "first_key", "max_version", "stamps", "present", "sorted_cells")
 
     def __init__(self, obstacle, arrival):
         self.uuid = obstacle.uuid
@@ -92,6 +105,10 @@ class _Entry:
         self.geometry = obstacle.geometry
         self.frame_id = obstacle.frame_id
         self.arrival = arrival
+        # Local expiry. Deadlines on the wire are remaining lifetimes aged to the moment of
+        # sending, so arrival + deadline is the original's expiry (plus transit); a later
+        # copy can only bring it closer, never push it back (see note_deadline).
+        self.expires_at = arrival + obstacle.deadline
         self.first_key = _meta_key(obstacle)
         self.max_version = obstacle.version
         self.stamps = {}          # cell -> (version, source) of the update that last set it
@@ -133,6 +150,10 @@ class _Entry:
             self.sorted_cells = None
         return changed
 
+    def note_deadline(self, now, deadline):
+        """Another message for this obstacle arrived at `now` saying `deadline` s remain."""
+        self.expires_at = min(self.expires_at, now + deadline)
+
     def cells(self):
         if self.sorted_cells is None:
             self.sorted_cells = tuple(sorted(self.present))
@@ -164,7 +185,7 @@ class SharingHandler:
 
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
-                 max_deferred=10000):
+                 max_deferred=10000, max_obstacle_extent=10.0):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -183,6 +204,7 @@ class SharingHandler:
         self._max_cells = max_cells_per_message
         self._new_uuid = uuid_factory or (lambda: str(uuidlib.uuid4()))
         self._max_deferred = max_deferred
+        self._max_extent = max_obstacle_extent
         self._entries = {}      # uuid -> _Entry
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
         self._deferred = []     # fleet messages waiting for a grid
@@ -241,6 +263,7 @@ class SharingHandler:
                 raise InvalidMessageError("malformed", "proposal already has uuid %r" % obstacle.uuid)
             if not obstacle.marked:
                 raise InvalidMessageError("empty_proposal", "no marked cells in %s" % obstacle.rectangle)
+            check_message_values(obstacle)
             if self._geometry is None:
                 _log.info("%s: no map yet; taking the grid of the first proposal: %s",
                           self.robot_name, obstacle.geometry)
@@ -270,11 +293,20 @@ class SharingHandler:
                                           "handler does not hold" % obstacle.uuid)
             if self._geometry is None:
                 raise InvalidMessageError("no_geometry", "no grid known yet")
+            check_message_values(obstacle)
             self._check_grid(obstacle)
+            if entry.expires_at - self._clock() < 1.0:
+                # deadlines travel in whole seconds: sent now it would outlive the obstacle here
+                raise InvalidMessageError("expired", "obstacle %s has less than 1 s left" % obstacle.uuid)
+            if obstacle.version <= entry.max_version and entry.max_version >= obstacle_rules.MAX_VERSION:
+                raise InvalidMessageError("bad_version", "obstacle %s is at the last version %d"
+                                          % (obstacle.uuid, entry.max_version))
         except InvalidMessageError as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
         changes = {}
+        if not obstacle.stamp:
+            changes["stamp"] = self._clock()
         if obstacle.version <= entry.max_version:
             changes["version"] = entry.max_version + 1
             self._counters["restamped"] += 1
@@ -285,13 +317,22 @@ class SharingHandler:
             _log.debug("%s: internal update of %s claims source %r; set to own name",
                        self.robot_name, obstacle.uuid, obstacle.source)
             changes["source"] = self.robot_name
-        # The rectangle and deadline never change after the first share (DESIGN.md §5.7).
+        # The rectangle never changes after the first share (DESIGN.md §5.7). The deadline
+        # goes out as the lifetime left now, so a robot that missed the first share and
+        # adds the obstacle from this update does not keep it longer than we do.
         if obstacle.rectangle != entry.rectangle:
             changes["rectangle"] = entry.rectangle
-        if obstacle.deadline != entry.deadline:
-            changes["deadline"] = entry.deadline
+        left = remaining_deadline(entry.expires_at - self._clock())
+        if obstacle.deadline != left:
+            changes["deadline"] = left
         if changes:
             obstacle = obstacle.replace(**changes)
+        try:
+            # What goes out must pass the fleet check on every receiver (the same rules).
+            check_fleet_message(obstacle)
+        except InvalidMessageError as err:
+            self.reject(self.robot_name, obstacle.uuid, err)
+            return None
         self._to_fleet(obstacle)
         self._counters["updates_out"] += 1
         if entry.apply(obstacle):
@@ -328,6 +369,7 @@ class SharingHandler:
                       obstacle.deadline)
         else:
             changed = entry.apply(obstacle)
+            entry.note_deadline(self._clock(), obstacle.deadline)
         self._counters["updates_in"] += 1
         self._to_layer(obstacle)
         if changed:
@@ -344,12 +386,25 @@ class SharingHandler:
         try:
             if not isinstance(rectangle, Rectangle):
                 rectangle = Rectangle.from_sequence(rectangle)
+            if isinstance(deadline, bool) or not isinstance(deadline, int) \
+                    or not 0 <= deadline <= obstacle_rules.MAX_UINT32:
+                raise InvalidRequestError("deadline %r is not 0..%d s" % (deadline, obstacle_rules.MAX_UINT32))
+            obstacle = Obstacle(uuid="", marked=(), cleared=(), deadline=0, rectangle=rectangle,
+                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id,
+                                stamp=self._clock())
+            check_message_values(obstacle)  # the rectangle lies on the grid, the stamp is ROS time
+            width, height = rectangle.max_x - rectangle.min_x, rectangle.max_y - rectangle.min_y
+            if max(width, height) > self._max_extent:
+                # An obstacle blocks a pathway; a huge rectangle would make every later
+                # proposal under it redundant on every robot.
+                raise InvalidRequestError("rectangle %s is %g m x %g m, larger than max_obstacle_extent "
+                                          "%g m" % (rectangle, width, height, self._max_extent))
             marked = tuple(int(c) for c in marked) or self._geometry.cells_in(rectangle)
             if not marked:
                 raise InvalidRequestError("rectangle %s covers no cell of the map (%s)"
                                           % (rectangle, self._geometry))
-            obstacle = Obstacle(uuid="", marked=marked, cleared=(), deadline=0, rectangle=rectangle,
-                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id)
+            obstacle = obstacle.replace(marked=marked)
+            check_message_values(obstacle)
             check_indexes(obstacle, self._geometry, self._max_cells)
         except InvalidMessageError as err:
             raise InvalidRequestError(str(err)) from err
@@ -364,15 +419,15 @@ class SharingHandler:
         """Removes every obstacle whose deadline has passed since its local arrival (no message
         goes to the fleet; the layer is told). Returns the expired uuids, sorted."""
         now = self._clock()
-        gone = sorted(u for u, e in self._entries.items() if now - e.arrival >= e.deadline)
+        gone = sorted(u for u, e in self._entries.items() if now >= e.expires_at)
         for uuid in gone:
             entry = self._entries.pop(uuid)
             # Remember the uuid at least obstacle_duration more, so a late message cannot
             # resurrect the obstacle on this robot only.
             self._tombstones[uuid] = now + max(self._deadline, entry.deadline)
             self._counters["expired"] += 1
-            _log.info("%s: obstacle %s expired (%d s after arrival at %.3f)", self.robot_name, uuid,
-                      entry.deadline, entry.arrival)
+            _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
+                      entry.expires_at - entry.arrival, entry.arrival)
             self._expired_out(uuid)
         for uuid in [u for u, until in self._tombstones.items() if now >= until]:
             del self._tombstones[uuid]
@@ -390,8 +445,9 @@ class SharingHandler:
     # ----------------------------------------------------------------- internals
 
     def _authorise(self, obstacle, deadline):
+        # stamp = when the share was made: the layer's detection time, or now (manual adds).
         shared = obstacle.replace(uuid=self._new_uuid(), version=1, source=self.robot_name,
-                                  deadline=deadline)
+                                  deadline=deadline, stamp=obstacle.stamp or self._clock())
         entry = _Entry(shared, self._clock())
         self._entries[shared.uuid] = entry
         entry.apply(shared)
@@ -411,15 +467,12 @@ class SharingHandler:
         return None
 
     def _check_external(self, obstacle):
-        if not obstacle.source:
-            raise InvalidMessageError("malformed", "empty source")
-        if obstacle.source == self.robot_name:
+        # The same rules the bridge applies to what arrives over MQTT (neither is looser).
+        check_fleet_message(obstacle)
+        if obstacle.source == self.robot_name and obstacle.uuid in self._entries:
+            # An echo, or someone else speaking for us about an obstacle we hold. An own obstacle
+            # we do not hold is accepted: after a restart, peers give our obstacles back.
             raise InvalidMessageError("own_source", "message claims to come from this robot")
-        check_uuid(obstacle.uuid)
-        if obstacle.version == 0:
-            raise InvalidMessageError("bad_version", "version 0 (a proposal) on the fleet channel")
-        if obstacle.deadline == 0:
-            raise InvalidMessageError("zero_deadline", "deadline 0")
         if obstacle.uuid in self._tombstones:
             raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
 
@@ -434,5 +487,4 @@ class SharingHandler:
         return HeldObstacle(uuid=entry.uuid, source=entry.source, version=entry.max_version,
                             deadline=entry.deadline, rectangle=entry.rectangle,
                             geometry=entry.geometry, frame_id=entry.frame_id, cells=entry.cells(),
-                            arrival=entry.arrival,
-                            remaining=entry.deadline - (now - entry.arrival))
+                            arrival=entry.arrival, remaining=entry.expires_at - now)

@@ -4,7 +4,6 @@ Runs as robot_N/sharing_handler; every topic and service name is relative to the
 namespace except /diagnostics and the map topic. See the package README for the interface.
 """
 import logging
-import math
 import sys
 import threading
 
@@ -12,12 +11,14 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs import safe_publisher
+from sharing_msgs.safe_publisher import SafePublisher
 from sharing_msgs.srv import AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse
 from std_msgs.msg import String
 
 from sharing_handler_py import snapshot
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError, InvalidRequestError
-from sharing_handler_py.logic import SharingHandler
+from sharing_handler_py.logic import SharingHandler, remaining_deadline
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
 
 
@@ -86,6 +87,7 @@ def read_params():
         expiry_rate=rospy.get_param("~expiry_rate", 1.0),
         snapshot_file=rospy.get_param("~snapshot_file", ""),
         max_cells_per_message=rospy.get_param("~max_cells_per_message", 100000),
+        max_obstacle_extent=rospy.get_param("~max_obstacle_extent", 10.0),
         map_topic=rospy.get_param("~map_topic", "/map"),
     )
 
@@ -101,19 +103,25 @@ class HandlerNode:
         self._dropped_reported = 0
         self._map_frame = ""
         self._list_cache = {}       # uuid -> (cells, metadata, SharedObstacle) of the last list
-        self._pub_layer = rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100)
+        # One message that cannot be serialised is dropped there; the publisher stays usable.
+        self._pub_layer = SafePublisher(
+            lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100),
+            topic="%s/shared_obstacles" % params.robot_name)
         self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
-        self._pub_fleet = rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000)
+        self._pub_fleet = SafePublisher(
+            lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000),
+            topic="%s/to_fleet" % params.robot_name)
         self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
                                          latch=True)
         self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.handler = SharingHandler(
             params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
-            on_to_layer=lambda o: self._pub_layer.publish(msg_from_obstacle(o)),
-            on_to_fleet=lambda o: self._pub_fleet.publish(msg_from_obstacle(o)),
+            on_to_layer=lambda o: self._deliver(self._pub_layer, o),
+            on_to_fleet=lambda o: self._deliver(self._pub_fleet, o),
             on_expired=lambda u: self._pub_expired.publish(String(data=u)),
             on_change=self._publish_list,
-            max_cells_per_message=params.max_cells_per_message)
+            max_cells_per_message=params.max_cells_per_message,
+            max_obstacle_extent=params.max_obstacle_extent)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
@@ -125,6 +133,16 @@ class HandlerNode:
         rospy.loginfo("%s: sharing handler up (obstacle_duration %g s, expiry %g Hz, map %s, "
                       "snapshot %s)", params.robot_name, params.obstacle_duration, params.expiry_rate,
                       params.map_topic, params.snapshot_file or "off")
+
+    def _deliver(self, publisher, obstacle):
+        try:
+            msg = msg_from_obstacle(obstacle)
+        except Exception as err:  # noqa: BLE001 - one bad value must not stop the node
+            publisher.drop("conversion", "%s: obstacle %s v%d from %s" % (
+                self.params.robot_name, obstacle.uuid, obstacle.version, obstacle.source), err)
+            return
+        publisher.publish(msg, "%s: obstacle %s v%d from %s" % (
+            self.params.robot_name, obstacle.uuid, obstacle.version, obstacle.source))
 
     # ------------------------------------------------------------ callbacks
 
@@ -218,7 +236,7 @@ class HandlerNode:
         fresh[held.uuid] = cached
         msg = cached[2]
         msg.header.stamp = now
-        msg.deadline = max(1, int(math.ceil(held.remaining)))
+        msg.deadline = remaining_deadline(held.remaining)  # aged to header.stamp, rounded down
         return msg
 
     def _publish_diagnostics(self):
@@ -226,7 +244,20 @@ class HandlerNode:
         dropped = sum(v for k, v in counters.items() if k.startswith("dropped_"))
         status = DiagnosticStatus(name="sharing_handler (%s)" % self.params.robot_name,
                                   hardware_id=self.params.robot_name)
-        if dropped > self._dropped_reported:
+        delivery, worst, problems = {}, safe_publisher.OK, []
+        for topic, publisher in (("shared_obstacles", self._pub_layer), ("to_fleet", self._pub_fleet)):
+            level, problem, errors = publisher.report()
+            worst = max(worst, level)
+            problems += [problem] if problem else []
+            for reason, n in errors.items():
+                delivery["delivery_error.%s.%s" % (topic, reason)] = n
+        if worst == safe_publisher.ERROR:
+            status.level = DiagnosticStatus.ERROR
+            status.message = "; ".join(problems)
+        elif worst == safe_publisher.WARN:
+            status.level = DiagnosticStatus.WARN
+            status.message = "; ".join(problems)
+        elif dropped > self._dropped_reported:
             status.level = DiagnosticStatus.WARN
             status.message = "%d messages dropped since the last report" % (dropped - self._dropped_reported)
         else:
@@ -237,6 +268,7 @@ class HandlerNode:
                          KeyValue(key="grid", value=str(self.handler.geometry or "unknown")),
                          KeyValue(key="dropped", value=str(dropped))]
         status.values += [KeyValue(key=k, value=str(v)) for k, v in sorted(counters.items())]
+        status.values += [KeyValue(key=k, value=str(v)) for k, v in sorted(delivery.items())]
         array = DiagnosticArray(status=[status])
         array.header.stamp = rospy.Time.now()
         self._pub_diag.publish(array)
@@ -253,10 +285,11 @@ class HandlerNode:
 
 def main(argv=None):
     rospy.init_node("sharing_handler", argv=argv)
-    log = logging.getLogger("sharing_handler_py")
-    log.setLevel(logging.DEBUG)  # rospy's own level decides what is shown
-    log.addHandler(RosoutHandler())
-    log.propagate = False
+    for name in ("sharing_handler_py", "sharing_msgs"):  # sharing_msgs: the safe publishers' drops
+        log = logging.getLogger(name)
+        log.setLevel(logging.DEBUG)  # rospy's own level decides what is shown
+        log.addHandler(RosoutHandler())
+        log.propagate = False
     try:
         params = read_params()
     except InvalidParameterError as err:

@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from typing import Tuple
 
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError
+from sharing_msgs import obstacle_rules
 
 #: Relative tolerance for comparing resolutions and origins of two grids.
 GEOMETRY_REL_TOL = 1e-6
@@ -189,6 +190,54 @@ def check_indexes(obstacle, geometry, max_cells):
                                           % (name, bad, limit, geometry))
 
 
+def _rule_fields(obstacle):
+    g = obstacle.geometry
+    return (obstacle.uuid, obstacle.source, obstacle.version, obstacle.stamp, obstacle.frame_id,
+            obstacle.deadline, obstacle.rectangle.as_list(), g.resolution, g.origin_x, g.origin_y,
+            g.size_x, g.size_y, obstacle.marked, obstacle.cleared)
+
+
+def _drop_reason(err):
+    """obstacle_rules.ObstacleFieldError -> one of logic.DROP_REASONS."""
+    field, kind = err.field, err.kind
+    if field == "uuid":
+        return "empty_uuid" if kind == obstacle_rules.EMPTY else "malformed"
+    if field == "version":
+        return "bad_version"
+    if field == "deadline":
+        return "zero_deadline" if err.value == 0 else "malformed"
+    if field == "stamp":
+        return "bad_stamp"
+    if field in ("resolution", "origin_x", "origin_y", "size_x", "size_y"):
+        return "bad_geometry"
+    if field == "rectangle_shape":
+        if kind == obstacle_rules.NON_FINITE:
+            return "non_finite_rectangle"
+        return "rectangle_outside_grid" if kind == obstacle_rules.OUTSIDE_GRID else "malformed"
+    if field in ("marked_indexes", "cleared_indexes"):
+        return {obstacle_rules.TOO_MANY: "too_many_cells", obstacle_rules.OUT_OF_RANGE: "index_out_of_range",
+                obstacle_rules.EMPTY: "empty_update"}.get(kind, "malformed")
+    return "malformed"
+
+
+def check_message_values(obstacle):
+    """Raises InvalidMessageError unless every field of `obstacle` fits sharing_msgs/SharedObstacle
+    and its own grid (the rules the bridge applies too; a proposal's empty uuid passes)."""
+    try:
+        obstacle_rules.check_values(*_rule_fields(obstacle))
+    except obstacle_rules.ObstacleFieldError as err:
+        raise InvalidMessageError(_drop_reason(err), str(err)) from None
+
+
+def check_fleet_message(obstacle):
+    """Raises InvalidMessageError unless `obstacle` is a valid message between robots: exactly
+    the check the bridge applies to what it receives over MQTT and what it sends."""
+    try:
+        obstacle_rules.check_fleet(*_rule_fields(obstacle))
+    except obstacle_rules.ObstacleFieldError as err:
+        raise InvalidMessageError(_drop_reason(err), str(err)) from None
+
+
 @dataclass(frozen=True)
 class HandlerParams:
     """The node's parameters, checked at start-up. Field names are the private parameter names."""
@@ -199,6 +248,7 @@ class HandlerParams:
     snapshot_file: str = ""            # YAML snapshot path; "" = off
     max_cells_per_message: int = 100000
     map_topic: str = "/map"
+    max_obstacle_extent: float = 10.0  # m, longest side of a manually added obstacle
 
     def __post_init__(self):
         def bad(name, why):
@@ -223,3 +273,6 @@ class HandlerParams:
             bad("max_cells_per_message", "must be a positive integer")
         if not isinstance(self.map_topic, str) or not self.map_topic:
             bad("map_topic", "must be a non-empty topic name")
+        value = self.max_obstacle_extent
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e6:
+            bad("max_obstacle_extent", "must be a positive number of metres below 1e6")
