@@ -65,10 +65,10 @@ def test_an_undeclared_import_of_a_higher_package_fails(tree):
 
 
 def test_an_import_inside_a_function_counts(tree):
-    bad = tree / "coaty_bridge" / "src" / "coaty_bridge" / "lazy.py"
-    bad.write_text("def f():\n    from sharing_handler_py.logic import SharingHandler\n    return SharingHandler\n")
+    bad = tree / "sharing_handler_py" / "src" / "sharing_handler_py" / "lazy.py"
+    bad.write_text("def f():\n    from coaty_bridge import codec\n    return codec\n")
     errors = errors_of(tree)
-    assert any("coaty_bridge uses sharing_handler_py" in e for e in errors), errors
+    assert any("sharing_handler_py uses coaty_bridge" in e for e in errors), errors
 
 
 def test_an_undeclared_ros_package_in_a_launch_file_fails(tree):
@@ -94,10 +94,10 @@ def test_an_unknown_module_is_reported_not_ignored(tree):
 
 
 def test_a_declared_but_unused_workspace_package_fails(tree):
-    set_declared(tree / "coaty_bridge" / "package.xml", "<depend>sharing_msgs</depend>",
-                 "<depend>sharing_msgs</depend>\n  <exec_depend>sharing_handler_py</exec_depend>")
+    set_declared(tree / "sharing_handler_py" / "package.xml", "<depend>sharing_msgs</depend>",
+                 "<depend>sharing_msgs</depend>\n  <exec_depend>coaty_bridge</exec_depend>")
     errors = errors_of(tree)
-    assert any("declares sharing_handler_py, but nothing in coaty_bridge uses it" in e for e in errors), errors
+    assert any("declares coaty_bridge, but nothing in sharing_handler_py uses it" in e for e in errors), errors
 
 
 def test_a_declared_cycle_fails(tree):
