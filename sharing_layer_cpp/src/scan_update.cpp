@@ -45,9 +45,12 @@ bool usable(const Point3& p, const ScanLimits& limits, ScanTouch& touch)
   return true;
 }
 
-/// A cost the grid never holds (it holds FREE_SPACE, LETHAL_OBSTACLE and NO_INFORMATION): a watched
-/// cell flagged with it and found FREE_SPACE after the scan was cleared by this scan.
-constexpr std::uint8_t kWatchedFlag = 1;
+/// Costs the grid never holds (it holds FREE_SPACE, LETHAL_OBSTACLE and NO_INFORMATION), used as flags on
+/// watched cells during one scan: not touched by a beam yet, seen free with the endpoint well beyond,
+/// cleared by a beam ending close behind.
+constexpr std::uint8_t kTracked = 1;
+constexpr std::uint8_t kFreeDeep = 2;
+constexpr std::uint8_t kFreeShallow = 3;
 
 void sortUnique(std::vector<std::uint32_t>& cells)
 {
@@ -87,17 +90,28 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       throw std::invalid_argument("applyScan: watched cell " + std::to_string(index) + " outside " + g.describe());
     }
   }
-  // Flag the watched cells that are not lethal; lethal ones need no flag, as FREE_SPACE after the scan
-  // can only come from this scan's clearing.
+  if (!std::isfinite(watch.free_margin) || watch.free_margin < 0.0)
+  {
+    throw std::invalid_argument("applyScan: free_margin must be finite and >= 0, got " +
+                                std::to_string(watch.free_margin));
+  }
+  // Flag every watched cell (kTracked) and keep its cost. Beams then move flags through tables instead of
+  // writing FREE_SPACE: kFreeDeep where the beam ends at least free_margin beyond the cell, kFreeShallow
+  // where it ends closer. Marking overwrites a flag with LETHAL_OBSTACLE; the flags are read back after.
   std::vector<std::uint8_t> watched_before(watch.cells.size());
   for (std::size_t i = 0; i < watch.cells.size(); ++i)
   {
     std::uint8_t& cost = costs[watch.cells[i]];
     watched_before[i] = cost;
-    if (cost != LETHAL_OBSTACLE)
-    {
-      cost = kWatchedFlag;
-    }
+    cost = kTracked;
+  }
+  std::uint8_t deep_table[256];
+  std::uint8_t shallow_table[256];
+  for (int v = 0; v < 256; ++v)
+  {
+    const bool flagged = v == kTracked || v == kFreeDeep || v == kFreeShallow;
+    deep_table[v] = flagged ? kFreeDeep : FREE_SPACE;
+    shallow_table[v] = flagged ? (v == kFreeDeep ? kFreeDeep : kFreeShallow) : FREE_SPACE;
   }
 
   const double ox = observation.origin.x;
@@ -111,6 +125,9 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     const double map_end_y = g.endY();
     const unsigned int cell_raytrace_range = g.cellDistance(limits.raytrace_range);
     SetCellAction clear{ costs, FREE_SPACE };
+    TableAction clear_deep{ costs, deep_table };
+    TableAction clear_shallow{ costs, shallow_table };
+    const bool watching = !watch.cells.empty();
 
     for (const Point3& p : observation.points)
     {
@@ -153,7 +170,15 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         continue;
       }
 
-      raytraceLine(clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
+      if (!watching)
+      {
+        raytraceLine(clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
+        continue;
+      }
+      // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam
+      // (the face it hit, a neighbour it grazed) only clears.
+      const double deep_until = (std::hypot(a, b) - watch.free_margin) / g.resolution;
+      raytraceLineSplit(clear_deep, clear_shallow, x0, y0, x1, y1, g.size_x, cell_raytrace_range, deep_until);
     }
   }
 
@@ -189,23 +214,35 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   }
   sortUnique(touch.marked);
 
-  // Read the flags back: FREE_SPACE means cleared by this scan (a cell marked again is lethal and was not
-  // seen free, as costmap_2d keeps it). Restored in reverse so a duplicate's saved flag is overwritten by
-  // the first occurrence's true cost.
+  // Read the flags back: kFreeDeep / kFreeShallow mean cleared by this scan and not marked again (a cell
+  // marked again is lethal and was not seen free, as costmap_2d keeps it), and the grid gets FREE_SPACE as
+  // without a watch; kTracked means untouched, and the cost is restored. Restored in reverse so a
+  // duplicate's saved flag is overwritten by the first occurrence's true cost.
   for (std::uint32_t index : watch.cells)
   {
-    if (costs[index] == FREE_SPACE)
+    const std::uint8_t v = costs[index];
+    if (v == kFreeDeep || v == kFreeShallow)
     {
       touch.watched_cleared.push_back(index);
+      if (v == kFreeDeep)
+      {
+        touch.watched_free.push_back(index);
+      }
     }
   }
   for (std::size_t i = watch.cells.size(); i-- > 0;)
   {
-    if (costs[watch.cells[i]] == kWatchedFlag)
+    std::uint8_t& cost = costs[watch.cells[i]];
+    if (cost == kTracked)
     {
-      costs[watch.cells[i]] = watched_before[i];
+      cost = watched_before[i];
+    }
+    else if (cost == kFreeDeep || cost == kFreeShallow)
+    {
+      cost = FREE_SPACE;
     }
   }
+  sortUnique(touch.watched_free);
   sortUnique(touch.watched_cleared);
   return touch;
 }

@@ -56,6 +56,9 @@ struct ScanTouch
   std::vector<std::uint32_t> marked;    ///< cells set lethal by this scan, sorted, unique
   /// Cells inside the watched rectangles that this scan cleared and did not mark again, sorted, unique.
   std::vector<std::uint32_t> watched_cleared;
+  /// Subset of watched_cleared passed by a beam whose endpoint lies at least the watch's free_margin
+  /// beyond the cell: evidence of free space, sorted, unique.
+  std::vector<std::uint32_t> watched_free;
 };
 
 }  // namespace sharing_layer

@@ -73,6 +73,99 @@ inline void raytraceLine(Action& at, unsigned int x0, unsigned int y0, unsigned 
   bresenham2D(at, abs_dy, abs_dx, error_x, offset_dy, offset_dx, offset, static_cast<unsigned int>(scale * abs_dy));
 }
 
+/**
+ * @brief bresenham2D with two actions: the first deep_steps cells (steps 0 .. deep_steps - 1 along the
+ * dominant axis) get deep, the rest shallow. The cells visited are exactly those of bresenham2D.
+ */
+template <class DeepAction, class ShallowAction>
+inline void bresenham2DSplit(DeepAction& deep, ShallowAction& shallow, unsigned int abs_da, unsigned int abs_db,
+                             int error_b, int offset_a, int offset_b, std::uint32_t offset, unsigned int max_length,
+                             unsigned int deep_steps)
+{
+  const unsigned int end = std::min(max_length, abs_da);
+  const unsigned int split = std::min(end, deep_steps);
+  unsigned int i = 0;
+  for (; i < split; ++i)
+  {
+    deep(offset);
+    offset += offset_a;
+    error_b += abs_db;
+    if (static_cast<unsigned int>(error_b) >= abs_da)
+    {
+      offset += offset_b;
+      error_b -= abs_da;
+    }
+  }
+  for (; i < end; ++i)
+  {
+    shallow(offset);
+    offset += offset_a;
+    error_b += abs_db;
+    if (static_cast<unsigned int>(error_b) >= abs_da)
+    {
+      offset += offset_b;
+      error_b -= abs_da;
+    }
+  }
+  if (end < deep_steps)
+  {
+    deep(offset);
+  }
+  else
+  {
+    shallow(offset);
+  }
+}
+
+/**
+ * @brief raytraceLine whose cells up to deep_until cells (Euclidean distance from the start cell's centre,
+ * in cells) get deep and the cells after that get shallow. Visits the same cells as raytraceLine.
+ * A negative deep_until makes every cell shallow.
+ */
+template <class DeepAction, class ShallowAction>
+inline void raytraceLineSplit(DeepAction& deep, ShallowAction& shallow, unsigned int x0, unsigned int y0,
+                              unsigned int x1, unsigned int y1, unsigned int size_x, unsigned int max_length,
+                              double deep_until)
+{
+  const int dx = static_cast<int>(x1) - static_cast<int>(x0);
+  const int dy = static_cast<int>(y1) - static_cast<int>(y0);
+  const unsigned int abs_dx = static_cast<unsigned int>(std::abs(dx));
+  const unsigned int abs_dy = static_cast<unsigned int>(std::abs(dy));
+  const int offset_dx = signOf(dx);
+  const int offset_dy = signOf(dy) * static_cast<int>(size_x);
+  const std::uint32_t offset = y0 * size_x + x0;
+
+  const double dist = std::hypot(static_cast<double>(dx), static_cast<double>(dy));
+  const double scale = (dist == 0.0) ? 1.0 : std::min(1.0, max_length / dist);
+  const unsigned int abs_da = std::max(abs_dx, abs_dy);
+  // Step i along the dominant axis lies i * dist / abs_da cells from the start.
+  unsigned int deep_steps = 0;
+  if (deep_until >= 0.0)
+  {
+    const double steps = dist == 0.0 ? 1.0 : std::floor(deep_until * abs_da / dist) + 1.0;
+    deep_steps = steps >= static_cast<double>(UINT_MAX) ? UINT_MAX : static_cast<unsigned int>(steps);
+  }
+
+  if (abs_dx >= abs_dy)
+  {
+    const int error_y = static_cast<int>(abs_dx / 2);
+    bresenham2DSplit(deep, shallow, abs_dx, abs_dy, error_y, offset_dx, offset_dy, offset,
+                     static_cast<unsigned int>(scale * abs_dx), deep_steps);
+    return;
+  }
+  const int error_x = static_cast<int>(abs_dy / 2);
+  bresenham2DSplit(deep, shallow, abs_dy, abs_dx, error_x, offset_dy, offset_dx, offset,
+                   static_cast<unsigned int>(scale * abs_dy), deep_steps);
+}
+
+/// @brief Action that replaces every visited cell's value through a 256-entry table.
+struct TableAction
+{
+  std::uint8_t* costs;
+  const std::uint8_t* table;
+  inline void operator()(std::uint32_t offset) { costs[offset] = table[costs[offset]]; }
+};
+
 /// @brief Action that writes one value into every visited cell (costmap_2d's MarkCell).
 struct SetCellAction
 {

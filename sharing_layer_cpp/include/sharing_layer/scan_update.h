@@ -18,6 +18,10 @@ namespace sharing_layer
 struct ScanWatch
 {
   std::vector<std::uint32_t> cells;  ///< watched cell indexes (duplicates allowed)
+  /// A watched cell counts as seen free (ScanTouch::watched_free) only when a beam passes through it and
+  /// its endpoint lies at least this far (m) beyond the cell. Cleared cells closer to the endpoint are
+  /// reported in watched_cleared only: they may be the face the beam hit, or a neighbour it grazed.
+  double free_margin = 0.0;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);
@@ -36,7 +40,9 @@ struct ScanWatch
  * for both.
  *
  * The watched cells this scan cleared and did not mark again are returned in watched_cleared, so a
- * caller can tell which known cells this scan saw free. Watched cell indexes must lie in the grid.
+ * caller can tell which known cells this scan saw free; those among them that a beam passed with its
+ * endpoint at least watch.free_margin beyond are also returned in watched_free (evidence of free space).
+ * The grid ends exactly as without a watch. Watched cell indexes must lie in the grid.
  *
  * @throws std::invalid_argument when the limits are invalid (grid left untouched)
  */

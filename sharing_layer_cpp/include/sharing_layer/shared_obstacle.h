@@ -76,6 +76,9 @@ struct SharedObstacle
   double arrival_time = 0.0;     ///< local time of the first update seen
   std::uint64_t max_version = 0; ///< highest version seen
   VersionedCellSet cells;
+  /// Per present cell: scans of this robot with evidence of free space since the cell was last marked
+  /// (local monitoring state, never sent).
+  std::unordered_map<std::uint32_t, std::uint16_t> free_scans;
 };
 
 }  // namespace sharing_layer
