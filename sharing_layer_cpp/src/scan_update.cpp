@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -51,6 +52,7 @@ bool usable(const Point3& p, const ScanLimits& limits, ScanTouch& touch)
 constexpr std::uint8_t kTracked = 1;
 constexpr std::uint8_t kFreeDeep = 2;
 constexpr std::uint8_t kFreeShallow = 3;
+constexpr std::uint8_t kHitBit = 4;  ///< added to a flag when an endpoint of this scan lies in the cell
 
 void sortUnique(std::vector<std::uint32_t>& cells)
 {
@@ -90,6 +92,11 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       throw std::invalid_argument("applyScan: watched cell " + std::to_string(index) + " outside " + g.describe());
     }
   }
+  if (watch.free_neighbours > 10000)
+  {
+    throw std::invalid_argument("applyScan: free_neighbours must be <= 10000, got " +
+                                std::to_string(watch.free_neighbours));
+  }
   if (!std::isfinite(watch.free_margin) || watch.free_margin < 0.0)
   {
     throw std::invalid_argument("applyScan: free_margin must be finite and >= 0, got " +
@@ -128,9 +135,43 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     TableAction clear_deep{ costs, deep_table };
     TableAction clear_shallow{ costs, shallow_table };
     const bool watching = !watch.cells.empty();
-
-    for (const Point3& p : observation.points)
+    // Per point: the shortest 2D range among it and its free_neighbours neighbours on each side.
+    std::vector<double> shadow_range;
+    if (watching)
     {
+      const std::size_t n = observation.points.size();
+      std::vector<double> range(n, std::numeric_limits<double>::infinity());
+      for (std::size_t i = 0; i < n; ++i)
+      {
+        const Point3& p = observation.points[i];
+        if (std::isfinite(p.x) && std::isfinite(p.y))
+        {
+          range[i] = std::hypot(p.x - ox, p.y - oy);
+        }
+      }
+      shadow_range = range;
+      const std::size_t k = watch.free_neighbours;
+      if (k > 0)
+      {
+        for (std::size_t i = 0; i < n; ++i)
+        {
+          const std::size_t lo = i >= k ? i - k : 0;
+          const std::size_t hi = std::min(n - 1, i + k);
+          double m = range[i];
+          for (std::size_t j = lo; j <= hi; ++j)
+          {
+            m = std::min(m, range[j]);
+          }
+          shadow_range[i] = m;
+        }
+      }
+    }
+    std::size_t point_index = 0;
+
+    for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
+    {
+      const Point3& p = observation.points[pi];
+      point_index = pi;
       if (!usable(p, limits, touch))
       {
         continue;
@@ -177,8 +218,34 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       }
       // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam
       // (the face it hit, a neighbour it grazed) only clears.
-      const double deep_until = (std::hypot(a, b) - watch.free_margin) / g.resolution;
+      const double deep_until = (std::min(std::hypot(a, b), shadow_range[point_index]) - watch.free_margin) /
+                                g.resolution;
       raytraceLineSplit(clear_deep, clear_shallow, x0, y0, x1, y1, g.size_x, cell_raytrace_range, deep_until);
+    }
+  }
+
+  // Endpoints at any range in watched cells: evidence of occupancy (costmap_2d marks only within
+  // obstacle_range, so a face beyond it would otherwise look free to the beams that graze it).
+  if (!watch.cells.empty())
+  {
+    for (const Point3& p : observation.points)
+    {
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < limits.min_obstacle_height ||
+          p.z > limits.max_obstacle_height)
+      {
+        continue;
+      }
+      unsigned int mx = 0, my = 0;
+      if (!g.worldToMap(p.x, p.y, mx, my))
+      {
+        continue;
+      }
+      std::uint8_t& cost = costs[g.getIndex(mx, my)];
+      if (cost >= kTracked && cost <= kFreeShallow)
+      {
+        cost = static_cast<std::uint8_t>(cost | kHitBit);
+        touch.watched_hit.push_back(g.getIndex(mx, my));
+      }
     }
   }
 
@@ -221,10 +288,15 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   for (std::uint32_t index : watch.cells)
   {
     const std::uint8_t v = costs[index];
-    if (v == kFreeDeep || v == kFreeShallow)
+    if (v > (kFreeShallow | kHitBit))
+    {
+      continue;  // marked (LETHAL_OBSTACLE) by this scan
+    }
+    const std::uint8_t state = static_cast<std::uint8_t>(v & ~kHitBit);
+    if (state == kFreeDeep || state == kFreeShallow)
     {
       touch.watched_cleared.push_back(index);
-      if (v == kFreeDeep)
+      if (state == kFreeDeep && !(v & kHitBit))
       {
         touch.watched_free.push_back(index);
       }
@@ -233,15 +305,21 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   for (std::size_t i = watch.cells.size(); i-- > 0;)
   {
     std::uint8_t& cost = costs[watch.cells[i]];
-    if (cost == kTracked)
+    if (cost > (kFreeShallow | kHitBit))
+    {
+      continue;
+    }
+    const std::uint8_t state = static_cast<std::uint8_t>(cost & ~kHitBit);
+    if (state == kTracked)
     {
       cost = watched_before[i];
     }
-    else if (cost == kFreeDeep || cost == kFreeShallow)
+    else if (state == kFreeDeep || state == kFreeShallow)
     {
       cost = FREE_SPACE;
     }
   }
+  sortUnique(touch.watched_hit);
   sortUnique(touch.watched_free);
   sortUnique(touch.watched_cleared);
   return touch;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 #include <limits>
 #include <stdexcept>
 
@@ -58,8 +59,14 @@ void LayerParams::validate() const
   };
   check_non_negative(clearing_margin, "clearing_margin", "m");
   check_non_negative(trigger_memory, "trigger_memory", "s");
+  check_non_negative(clearing_time, "clearing_time", "s");
   check_non_negative(trigger_radius, "trigger_radius", "m");
   check_non_negative(inscribed_radius, "inscribed_radius", "m");
+  if (clearing_neighbours > 1000)
+  {
+    throw std::invalid_argument("clearing_neighbours must be 0..1000 beams, got " +
+                                std::to_string(clearing_neighbours));
+  }
   if (clearing_scans == 0 || clearing_scans > 1000)
   {
     throw std::invalid_argument("clearing_scans must be 1..1000 scans, got " + std::to_string(clearing_scans));
@@ -215,6 +222,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   std::vector<SharedObstacle*> in_view;
   ScanWatch watch;
   watch.free_margin = params_.clearing_margin;
+  watch.free_neighbours = params_.clearing_neighbours;
   if (origin_finite)
   {
     for (auto& entry : shared_)
@@ -283,7 +291,25 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   ScanOutcome outcome;
   outcome.touch = applyScan(obstacles_, observation, params_.limits, watch);
   trackShareable(outcome.touch, observation);
-  remember(outcome.touch, observation, now_s);
+  // Signs of occupancy among the watched cells: marked, an endpoint in it beyond obstacle_range, or cleared
+  // by a beam that ended close behind it (the face it hit, or a neighbour it grazed).
+  std::vector<std::uint32_t> occupied;
+  {
+    const ScanTouch& t = outcome.touch;
+    std::set_difference(t.watched_cleared.begin(), t.watched_cleared.end(), t.watched_free.begin(),
+                        t.watched_free.end(), std::back_inserter(occupied));
+    occupied.insert(occupied.end(), t.watched_hit.begin(), t.watched_hit.end());
+    for (std::uint32_t index : t.marked)
+    {
+      if (monitored_[index] != 0 || memory_.count(index) != 0)
+      {
+        occupied.push_back(index);
+      }
+    }
+    std::sort(occupied.begin(), occupied.end());
+    occupied.erase(std::unique(occupied.begin(), occupied.end()), occupied.end());
+  }
+  remember(outcome.touch, occupied, observation, now_s);
   last_scan_time_ = now_s;
   last_static_marked_ = 0;
   for (std::uint32_t index : outcome.touch.marked)
@@ -318,7 +344,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   {
     const CellRect& r = obstacle->rectangle_cells;
     ObstacleUpdate update;
-    // Both lists are sorted: each row of the rectangle is one contiguous index range in them.
+    // The lists are sorted: each row of the rectangle is one contiguous index range in them.
     for (int y = r.min_y; y <= r.max_y; ++y)
     {
       const std::uint32_t row_first = g.getIndex(static_cast<unsigned int>(r.min_x), static_cast<unsigned int>(y));
@@ -326,28 +352,27 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       for (auto it = std::lower_bound(marked_watched.begin(), marked_watched.end(), row_first);
            it != marked_watched.end() && *it <= row_last; ++it)
       {
-        if (obstacle->cells.isPresent(*it))
-        {
-          obstacle->free_scans.erase(*it);  // seen occupied: the evidence of free space starts again
-        }
-        else if (!static_filter_.isStatic(*it))
+        if (!obstacle->cells.isPresent(*it) && !static_filter_.isStatic(*it))
         {
           update.marked.push_back(*it);
         }
       }
-      // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough
-      // (a beam grazing a face, localisation jitter); clearing_scans of them clear the cell.
+      for (auto it = std::lower_bound(occupied.begin(), occupied.end(), row_first);
+           it != occupied.end() && *it <= row_last; ++it)
+      {
+        obstacle->free_streaks.erase(*it);  // a sign of occupancy: the evidence of free space starts again
+      }
+      // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough (a
+      // beam grazing along a face through the free part of its cells, localisation jitter): an unbroken
+      // streak of clearing_scans scans over clearing_time clears the cell.
       for (auto it = std::lower_bound(seen_free.begin(), seen_free.end(), row_first);
            it != seen_free.end() && *it <= row_last; ++it)
       {
-        if (obstacle->cells.isPresent(*it))
+        if (obstacle->cells.isPresent(*it) &&
+            obstacle->free_streaks[*it].add(now_s, params_.clearing_scans, params_.clearing_time))
         {
-          std::uint16_t& count = obstacle->free_scans[*it];
-          if (++count >= params_.clearing_scans)
-          {
-            obstacle->free_scans.erase(*it);
-            update.cleared.push_back(*it);
-          }
+          obstacle->free_streaks.erase(*it);
+          update.cleared.push_back(*it);
         }
       }
     }
@@ -371,7 +396,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   return outcome;
 }
 
-void SharingCore::remember(const ScanTouch& touch, const Observation& observation, double now_s)
+void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied,
+                           const Observation& observation, double now_s)
 {
   if (params_.trigger_memory <= 0.0 || !std::isfinite(now_s))
   {
@@ -379,10 +405,18 @@ void SharingCore::remember(const ScanTouch& touch, const Observation& observatio
   }
   // Remembered cells leave on the same evidence as shared ones, not on costmap clearing: a robot backing off
   // clears a block's face with beams that end on it past obstacle_range.
+  for (std::uint32_t index : occupied)
+  {
+    auto found = memory_.find(index);
+    if (found != memory_.end())
+    {
+      found->second.free.reset();
+    }
+  }
   for (std::uint32_t index : touch.watched_free)
   {
     auto found = memory_.find(index);
-    if (found != memory_.end() && ++found->second.free_scans >= params_.clearing_scans)
+    if (found != memory_.end() && found->second.free.add(now_s, params_.clearing_scans, params_.clearing_time))
     {
       memory_.erase(found);
     }
@@ -393,7 +427,7 @@ void SharingCore::remember(const ScanTouch& touch, const Observation& observatio
   {
     if (!static_filter_.isStatic(index))
     {
-      memory_[index] = RememberedCell{ now_s, sx, sy, 0 };
+      memory_[index] = RememberedCell{ now_s, sx, sy, FreeStreak() };
     }
   }
 }
@@ -856,7 +890,7 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   result.changed = obstacle.cells.apply(update.marked, update.cleared, update.version, update.source);
   for (std::uint32_t index : update.marked)
   {
-    obstacle.free_scans.erase(index);  // a robot saw it occupied: evidence of free space starts again
+    obstacle.free_streaks.erase(index);  // a robot saw it occupied: evidence of free space starts again
   }
   markDirty(update.marked);
   markDirty(update.cleared);

@@ -177,6 +177,7 @@ TEST(Monitoring, Figure45MovedObstacleSeenFromANewAngle)
   // east cell, hidden behind the obstacle, is left alone.
   LayerParams p = params();
   ASSERT_EQ(3u, p.clearing_scans);
+  ASSERT_EQ(1.0, p.clearing_time);
   SharingCore core(grid40(), p);
   std::vector<std::uint32_t> old_face;
   for (unsigned int y = 18; y <= 22; ++y)
@@ -206,8 +207,8 @@ TEST(Monitoring, Figure45MovedObstacleSeenFromANewAngle)
   EXPECT_EQ(new_face, outcome.updates[0].marked);
   EXPECT_TRUE(outcome.updates[0].cleared.empty());
   // The second scan is evidence too, but not enough yet: no update.
-  EXPECT_TRUE(core.processScan(scan(origin, beams), 5.1).updates.empty());
-  outcome = core.processScan(scan(origin, beams), 5.2);
+  EXPECT_TRUE(core.processScan(scan(origin, beams), 5.5).updates.empty());
+  outcome = core.processScan(scan(origin, beams), 6.0);
   ASSERT_EQ(1u, outcome.updates.size());
   const ObstacleUpdate& update = outcome.updates[0];
   EXPECT_EQ(3u, update.version);
@@ -218,7 +219,7 @@ TEST(Monitoring, Figure45MovedObstacleSeenFromANewAngle)
   std::sort(expected.begin(), expected.end());
   EXPECT_EQ(expected, core.sharedCells("fig45"));
   // The same scan again changes nothing: no update.
-  EXPECT_TRUE(core.processScan(scan(origin, beams), 5.3).updates.empty());
+  EXPECT_TRUE(core.processScan(scan(origin, beams), 6.5).updates.empty());
 }
 
 TEST(Monitoring, ObstaclesOutOfRangeAreNotTouched)

@@ -142,7 +142,8 @@ inline void raytraceLineSplit(DeepAction& deep, ShallowAction& shallow, unsigned
   unsigned int deep_steps = 0;
   if (deep_until >= 0.0)
   {
-    const double steps = dist == 0.0 ? 1.0 : std::floor(deep_until * abs_da / dist) + 1.0;
+    // (1e-9: a cell exactly deep_until away is deep despite rounding in the caller's arithmetic)
+    const double steps = dist == 0.0 ? 1.0 : std::floor(deep_until * abs_da / dist + 1e-9) + 1.0;
     deep_steps = steps >= static_cast<double>(UINT_MAX) ? UINT_MAX : static_cast<unsigned int>(steps);
   }
 

@@ -32,7 +32,9 @@ struct LayerParams
   std::string robot_name = "robot";        ///< source of this robot's updates
   // Evidence-based clearing of shared cells and remembered cells (the obstacle grid keeps costmap_2d's rules).
   double clearing_margin = 0.3;            ///< a beam is evidence of free space only when it ends this far (m) beyond the cell
-  unsigned int clearing_scans = 3;         ///< scans with such evidence (and no hit in between) that clear a cell
+  unsigned int clearing_scans = 3;         ///< scans with such evidence, without a sign of occupancy in between, that clear a cell
+  double clearing_time = 1.0;              ///< ... and the time (s) from the first to the last of them
+  unsigned int clearing_neighbours = 8;    ///< shadow filter: beams on each side whose endpoints also bound the evidence
   // Trigger memory: recently marked non-static cells, for triggers that come after the robot backed off.
   double trigger_memory = 30.0;            ///< seconds a marked cell is remembered (0: no memory)
   double trigger_radius = 4.0;             ///< a trigger proposes remembered cells within this distance (m) of the robot
@@ -89,7 +91,7 @@ struct RememberedCell
   double time = 0.0;            ///< last time a scan marked it, seconds
   float sensor_x = 0.0f;        ///< where the sensor was then (grid frame, m)
   float sensor_y = 0.0f;
-  std::uint16_t free_scans = 0; ///< scans with evidence of free space since the last mark
+  FreeStreak free;              ///< evidence of free space since the last sign of occupancy
 };
 
 
@@ -147,9 +149,12 @@ public:
    * @brief Clears and marks one observation, updates the shareable cells and the trigger memory, and
    * monitors every shared obstacle in view. Monitoring diffs are applied here and returned for the handler.
    *
-   * A shared cell is reported cleared only on evidence of free space: in clearing_scans scans (not
-   * necessarily consecutive) a beam passed through it and ended at least clearing_margin beyond it, with no
-   * scan marking it in between. The obstacle grid itself is cleared and marked with costmap_2d's rules.
+   * A shared cell is reported cleared only on evidence of free space: in at least clearing_scans scans
+   * spanning at least clearing_time seconds a beam passed through it and ended at least clearing_margin
+   * beyond it, and no scan in between showed a sign of occupancy (an endpoint in the cell at any range, or
+   * a beam through it ending less than clearing_margin behind it); scans that do not see the cell do not
+   * interrupt the streak. Remembered cells leave the trigger memory by the same rule. The obstacle grid
+   * itself is cleared and marked with costmap_2d's rules.
    */
   ScanOutcome processScan(const Observation& observation, double now_s);
 
@@ -218,7 +223,8 @@ private:
   void trackShareable(const ScanTouch& touch, const Observation& observation);
   void rebuildStaticFilter();
   void dropStaticCandidates();
-  void remember(const ScanTouch& touch, const Observation& observation, double now_s);
+  void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, const Observation& observation,
+                double now_s);
   /// @brief Shareable cells plus remembered cells within trigger_radius of (x, y), not static, not shared.
   std::vector<std::uint32_t> candidates(double robot_x, double robot_y) const;
   std::vector<Proposal> group(const std::vector<std::uint32_t>& cells, double robot_x, double robot_y) const;
