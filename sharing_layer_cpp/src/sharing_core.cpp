@@ -130,6 +130,7 @@ const char* triggerReasonName(TriggerReason reason)
 SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params)
   : params_(params), trigger_(params.trigger_debounce), plan_trigger_(params.trigger_debounce), dirty_(emptyBounds())
 {
+  last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();
   params_.validate();
   obstacles_ = CostGrid(GridGeometry(geometry.resolution, geometry.origin_x, geometry.origin_y, geometry.size_x,
                                      geometry.size_y),
@@ -311,6 +312,11 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   }
   remember(outcome.touch, occupied, observation, now_s);
   last_scan_time_ = now_s;
+  if (origin_finite)
+  {
+    last_origin_x_ = ox;
+    last_origin_y_ = oy;
+  }
   last_static_marked_ = 0;
   for (std::uint32_t index : outcome.touch.marked)
   {
@@ -472,6 +478,8 @@ std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_
   {
     const GridGeometry& g = geometry();
     const double radius_sq = params_.trigger_radius * params_.trigger_radius;
+    const double range_sq = params_.limits.obstacle_range * params_.limits.obstacle_range;
+    const bool have_origin = std::isfinite(last_origin_x_) && std::isfinite(last_origin_y_);
     for (const auto& entry : memory_)
     {
       const std::uint32_t index = entry.first;
@@ -483,7 +491,10 @@ std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_
       g.indexToCells(index, mx, my);
       double wx = 0.0, wy = 0.0;
       g.mapToWorld(mx, my, wx, wy);
-      if ((wx - robot_x) * (wx - robot_x) + (wy - robot_y) * (wy - robot_y) <= radius_sq)
+      const double sensor_sq = have_origin ? (wx - last_origin_x_) * (wx - last_origin_x_) +
+                                                 (wy - last_origin_y_) * (wy - last_origin_y_)
+                                           : kInf;
+      if ((wx - robot_x) * (wx - robot_x) + (wy - robot_y) * (wy - robot_y) <= radius_sq && sensor_sq >= range_sq)
       {
         cells.push_back(index);
       }
@@ -562,24 +573,31 @@ void SharingCore::explainNothing(TriggerReport& report, double robot_x, double r
       nearest = std::min(nearest, d);
     }
   }
-  if (near > 0 && near_shared == near)
-  {
-    report.reason = TriggerReason::AlreadyShared;
-    report.message += "nothing proposed: the " + std::to_string(near) +
-                      " recently marked cell(s) near the robot lie in obstacles already shared";
-  }
-  else if (near > 0)
+  if (!candidates(robot_x, robot_y).empty())
   {
     report.reason = TriggerReason::TooSmall;
     report.message += "nothing proposed: the candidate cells form groups smaller than min_cluster_cells " +
                       std::to_string(params_.min_cluster_cells);
   }
-  else if (far > 0)
+  else if (near_shared > 0)
+  {
+    report.reason = TriggerReason::AlreadyShared;
+    report.message += "nothing proposed: " + std::to_string(near_shared) + " of the " + std::to_string(near) +
+                      " recently marked cell(s) near the robot lie in obstacles already shared, the rest were "
+                      "seen free since";
+  }
+  else if (far > 0 && near == 0)
   {
     report.reason = TriggerReason::OutOfRange;
     report.message += "nothing proposed: " + std::to_string(far) + " recently marked cell(s), " +
                       format("the nearest %.2f m away, beyond trigger_radius %.2f m", nearest,
                              params_.trigger_radius);
+  }
+  else if (near > 0)
+  {
+    report.reason = TriggerReason::NothingMarked;
+    report.message += "nothing proposed: the " + std::to_string(near) +
+                      " recently marked cell(s) near the robot were seen free since";
   }
   else if (last_static_marked_ > 0)
   {
@@ -924,6 +942,7 @@ void SharingCore::resetObstacleLayer()
   memory_.clear();
   last_new_marked_.clear();
   last_static_marked_ = 0;
+  last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();
 }
 
 void SharingCore::drawShared(std::uint8_t* master, std::size_t cell_count) const

@@ -164,6 +164,8 @@ public:
   /**
    * @brief Groups the current shareable cells and the remembered cells within trigger_radius of the robot
    * (marked within trigger_memory seconds of the last scan) into proposals, with the configured strategy.
+   * Within obstacle_range of the last scan's origin the current view decides (the thesis rule); remembered
+   * cells are added only beyond it, where the robot can no longer mark them.
    */
   std::vector<Proposal> propose(double robot_x, double robot_y) const;
 
@@ -249,6 +251,8 @@ private:
   std::vector<std::uint32_t> last_new_marked_;  ///< non-static cells the last scan marked that were not lethal before
   std::size_t last_static_marked_ = 0;          ///< static cells the last scan marked
   double last_scan_time_ = 0.0;
+  double last_origin_x_ = 0.0;  ///< sensor origin of the last scan (NaN before the first)
+  double last_origin_y_ = 0.0;
   std::vector<std::uint32_t> shareable_;
   std::vector<std::uint8_t> is_shareable_;
   std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
