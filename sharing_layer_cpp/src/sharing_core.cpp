@@ -803,6 +803,14 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
   return report;
 }
 
+void SharingCore::setInscribedRadius(double radius_m)
+{
+  LayerParams changed = params_;
+  changed.inscribed_radius = radius_m;
+  changed.validate();
+  params_ = changed;
+}
+
 std::vector<std::uint32_t> SharingCore::rememberedCells() const
 {
   std::vector<std::uint32_t> cells;

@@ -189,6 +189,10 @@ public:
    */
   TriggerReport checkPlan(double robot_x, double robot_y, double now_s);
 
+  /// @brief Sets inscribed_radius (e.g. when the footprint changes); @throws std::invalid_argument when
+  /// negative or not finite
+  void setInscribedRadius(double radius_m);
+
   /// @return remembered cells (trigger memory), sorted
   std::vector<std::uint32_t> rememberedCells() const;
 
