@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -53,6 +54,159 @@ constexpr std::uint8_t kTracked = 1;
 constexpr std::uint8_t kFreeDeep = 2;
 constexpr std::uint8_t kFreeShallow = 3;
 constexpr std::uint8_t kHitBit = 4;  ///< added to a flag when an endpoint of this scan lies in the cell
+
+/// A monotonic stand-in for atan2(y, x) in [0, 4) (the "diamond angle"): one division instead of atan2.
+inline double pseudoAngle(double x, double y)
+{
+  if (y >= 0.0)
+  {
+    return x >= 0.0 ? (x + y == 0.0 ? 0.0 : y / (x + y)) : 1.0 - x / (-x + y);
+  }
+  return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
+}
+
+/// Directions (pseudo-angle intervals, seen from the origin cell) in which beams can cross a watched cell, with
+/// the band of distances (in cells) where those cells lie.
+class WatchedDirections
+{
+public:
+  struct Interval
+  {
+    double lo, hi;      ///< pseudo-angles
+    double near, far;   ///< distances from the origin cell's centre, cells
+  };
+
+  WatchedDirections(const GridGeometry& g, const ScanWatch& watch, unsigned int x0, unsigned int y0)
+  {
+    if (watch.cells.empty())
+    {
+      return;
+    }
+    if (!watch.regions.empty())
+    {
+      for (const CellRect& r : watch.regions)
+      {
+        add(r.min_x, r.min_y, r.max_x, r.max_y, x0, y0);
+      }
+    }
+    else
+    {
+      for (std::uint32_t index : watch.cells)
+      {
+        unsigned int cx = 0, cy = 0;
+        g.indexToCells(index, cx, cy);
+        add(static_cast<int>(cx), static_cast<int>(cy), static_cast<int>(cx), static_cast<int>(cy), x0, y0);
+      }
+    }
+  }
+
+  /// @brief Adds the directions and distances of the cells [min_x, max_x] x [min_y, max_y].
+  void add(int min_x, int min_y, int max_x, int max_y, unsigned int x0, unsigned int y0)
+  {
+    if (max_x < min_x || max_y < min_y)
+    {
+      return;
+    }
+    // A Bresenham line strays up to half a cell from the exact line between cell centres: grow by that and a
+    // margin, on top of the half cell from a centre to the cell's edge.
+    constexpr double kGrow = 0.5 + 0.6;
+    const double x_lo = min_x - static_cast<double>(x0) - kGrow, x_hi = max_x - static_cast<double>(x0) + kGrow;
+    const double y_lo = min_y - static_cast<double>(y0) - kGrow, y_hi = max_y - static_cast<double>(y0) + kGrow;
+    // Distances of the cell centres from the origin cell's centre, with room for the line's rounding.
+    const double nx = std::max(0.0, std::max(x_lo + kGrow, -(x_hi - kGrow)));
+    const double ny = std::max(0.0, std::max(y_lo + kGrow, -(y_hi - kGrow)));
+    const double fx = std::max(std::fabs(x_lo + kGrow), std::fabs(x_hi - kGrow));
+    const double fy = std::max(std::fabs(y_lo + kGrow), std::fabs(y_hi - kGrow));
+    const double near = std::sqrt(nx * nx + ny * ny) - 2.0, far = std::sqrt(fx * fx + fy * fy) + 2.0;
+    if (x_lo <= 0.5 && x_hi >= -0.5 && y_lo <= 0.5 && y_hi >= -0.5)
+    {
+      push(Interval{ 0.0, 4.0, near, far });  // around the origin: every direction
+      return;
+    }
+    const double corners[4][2] = { { x_lo, y_lo }, { x_hi, y_lo }, { x_lo, y_hi }, { x_hi, y_hi } };
+    double a[4];
+    double lo = 4.0, hi = 0.0;
+    for (int i = 0; i < 4; ++i)
+    {
+      a[i] = pseudoAngle(corners[i][0], corners[i][1]);
+      lo = std::min(lo, a[i]);
+      hi = std::max(hi, a[i]);
+    }
+    if (hi - lo > 2.0)  // straddles the +x axis (0 / 4): two intervals
+    {
+      double below = 0.0, above = 4.0;
+      for (double v : a)
+      {
+        if (v < 2.0)
+        {
+          below = std::max(below, v);
+        }
+        else
+        {
+          above = std::min(above, v);
+        }
+      }
+      push(Interval{ 0.0, below, near, far });
+      push(Interval{ above, 4.0, near, far });
+    }
+    else
+    {
+      push(Interval{ lo, hi, near, far });
+    }
+  }
+
+  /// @return whether a beam towards cell offset (dx, dy) from the origin cell can cross a watched cell, and if
+  /// so the band of distances (cells) where they lie
+  bool crosses(int dx, int dy, double& near, double& far) const
+  {
+    if (buckets_.empty())
+    {
+      return false;
+    }
+    const Band& b = buckets_[bucketOf(pseudoAngle(dx, dy))];
+    if (b.far < 0.0)
+    {
+      return false;
+    }
+    near = b.near;
+    far = b.far;
+    return true;
+  }
+
+private:
+  /// Pseudo-angle buckets (about 0.18 degrees each), each with the band of distances of the watched cells
+  /// whose directions overlap it; far < 0: none.
+  struct Band
+  {
+    double near, far;
+  };
+  static constexpr int kBuckets = 2048;
+  static int bucketOf(double angle)
+  {
+    return std::min(kBuckets - 1, std::max(0, static_cast<int>(angle * (kBuckets / 4.0))));
+  }
+  void push(const Interval& iv)
+  {
+    if (buckets_.empty())
+    {
+      buckets_.assign(kBuckets, Band{ 0.0, -1.0 });
+    }
+    for (int i = bucketOf(iv.lo), end = bucketOf(iv.hi); i <= end; ++i)
+    {
+      Band& b = buckets_[i];
+      if (b.far < 0.0)
+      {
+        b = Band{ iv.near, iv.far };
+      }
+      else
+      {
+        b.near = std::min(b.near, iv.near);
+        b.far = std::max(b.far, iv.far);
+      }
+    }
+  }
+  std::vector<Band> buckets_;
+};
 
 void sortUnique(std::vector<std::uint32_t>& cells)
 {
@@ -135,37 +289,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     TableAction clear_deep{ costs, deep_table };
     TableAction clear_shallow{ costs, shallow_table };
     const bool watching = !watch.cells.empty();
-    // Per point: the shortest 2D range among it and its free_neighbours neighbours on each side.
-    std::vector<double> shadow_range;
-    if (watching)
-    {
-      const std::size_t n = observation.points.size();
-      std::vector<double> range(n, std::numeric_limits<double>::infinity());
-      for (std::size_t i = 0; i < n; ++i)
-      {
-        const Point3& p = observation.points[i];
-        if (std::isfinite(p.x) && std::isfinite(p.y))
-        {
-          range[i] = std::hypot(p.x - ox, p.y - oy);
-        }
-      }
-      shadow_range = range;
-      const std::size_t k = watch.free_neighbours;
-      if (k > 0)
-      {
-        for (std::size_t i = 0; i < n; ++i)
-        {
-          const std::size_t lo = i >= k ? i - k : 0;
-          const std::size_t hi = std::min(n - 1, i + k);
-          double m = range[i];
-          for (std::size_t j = lo; j <= hi; ++j)
-          {
-            m = std::min(m, range[j]);
-          }
-          shadow_range[i] = m;
-        }
-      }
-    }
+    const WatchedDirections directions(g, watch, x0, y0);
     std::size_t point_index = 0;
 
     for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
@@ -211,46 +335,82 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         continue;
       }
 
-      if (!watching)
+      double watch_from = 0.0, watch_until = 0.0;
+      if (!watching || !directions.crosses(static_cast<int>(x1) - static_cast<int>(x0),
+                                           static_cast<int>(y1) - static_cast<int>(y0), watch_from, watch_until))
       {
         raytraceLine(clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
         continue;
       }
       // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam
       // (the face it hit, a neighbour it grazed) only clears.
-      const double deep_until = (std::min(std::hypot(a, b), shadow_range[point_index]) - watch.free_margin) /
-                                g.resolution;
-      raytraceLineSplit(clear_deep, clear_shallow, x0, y0, x1, y1, g.size_x, cell_raytrace_range, deep_until);
+      // Shadow filter: the shortest range among this point and its free_neighbours neighbours on each side
+      // (computed only for the few beams that can cross a watched cell).
+      double shadow_sq = a * a + b * b;
+      {
+        const std::size_t n = observation.points.size();
+        const std::size_t k = watch.free_neighbours;
+        const std::size_t lo = point_index >= k ? point_index - k : 0;
+        const std::size_t hi = std::min(n - 1, point_index + k);
+        for (std::size_t j = lo; j <= hi; ++j)
+        {
+          const Point3& q = observation.points[j];
+          const double r_sq = (q.x - ox) * (q.x - ox) + (q.y - oy) * (q.y - oy);
+          if (std::isfinite(r_sq))
+          {
+            shadow_sq = std::min(shadow_sq, r_sq);
+          }
+        }
+      }
+      const double deep_until = (std::sqrt(shadow_sq) - watch.free_margin) / g.resolution;
+      raytraceLineSplit(clear_deep, clear_shallow, clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range, watch_from,
+                        deep_until, watch_until);
     }
   }
 
-  // Endpoints at any range in watched cells: evidence of occupancy (costmap_2d marks only within
-  // obstacle_range, so a face beyond it would otherwise look free to the beams that graze it).
-  if (!watch.cells.empty())
-  {
-    for (const Point3& p : observation.points)
-    {
-      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < limits.min_obstacle_height ||
-          p.z > limits.max_obstacle_height)
-      {
-        continue;
-      }
-      unsigned int mx = 0, my = 0;
-      if (!g.worldToMap(p.x, p.y, mx, my))
-      {
-        continue;
-      }
-      std::uint8_t& cost = costs[g.getIndex(mx, my)];
-      if (cost >= kTracked && cost <= kFreeShallow)
-      {
-        cost = static_cast<std::uint8_t>(cost | kHitBit);
-        touch.watched_hit.push_back(g.getIndex(mx, my));
-      }
-    }
-  }
-
+  // Marking; while watching, endpoints at any range in watched cells are also recorded as evidence of
+  // occupancy (costmap_2d marks only within obstacle_range, so a face beyond it would otherwise look free to
+  // the beams that graze it).
   const double sq_obstacle_range = limits.obstacle_range * limits.obstacle_range;
   const double oz = observation.origin.z;
+  const bool watching = !watch.cells.empty();
+  // Endpoints farther than the farthest watched cell (plus a cell) cannot lie in one.
+  double sq_hit_range = -1.0;
+  const auto farther = [&](unsigned int cx, unsigned int cy) {
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(cx, cy, wx, wy);
+    sq_hit_range = std::max(sq_hit_range, (wx - ox) * (wx - ox) + (wy - oy) * (wy - oy));
+  };
+  if (!watch.regions.empty())
+  {
+    for (const CellRect& r : watch.regions)  // the farthest corner of each
+    {
+      if (!r.empty())
+      {
+        for (int cx : { r.min_x, r.max_x })
+        {
+          for (int cy : { r.min_y, r.max_y })
+          {
+            farther(static_cast<unsigned int>(std::max(0, cx)), static_cast<unsigned int>(std::max(0, cy)));
+          }
+        }
+      }
+    }
+  }
+  else
+  {
+    for (std::uint32_t index : watch.cells)
+    {
+      unsigned int cx = 0, cy = 0;
+      g.indexToCells(index, cx, cy);
+      farther(cx, cy);
+    }
+  }
+  if (sq_hit_range >= 0.0)
+  {
+    const double r = std::sqrt(sq_hit_range) + 1.5 * g.resolution;
+    sq_hit_range = r * r;
+  }
   for (const Point3& p : observation.points)
   {
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < limits.min_obstacle_height ||
@@ -259,7 +419,9 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       continue;  // counted in the clearing pass, or below when it did not run
     }
     const double sq_dist = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + (p.z - oz) * (p.z - oz);
-    if (sq_dist >= sq_obstacle_range)
+    const bool in_range = sq_dist < sq_obstacle_range;
+    const double sq_planar = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy);
+    if (!in_range && !(watching && sq_planar <= sq_hit_range))
     {
       continue;
     }
@@ -269,8 +431,16 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       continue;
     }
     const std::uint32_t index = g.getIndex(mx, my);
-    costs[index] = LETHAL_OBSTACLE;
-    touch.marked.push_back(index);
+    if (watching && costs[index] >= kTracked && costs[index] <= kFreeShallow)
+    {
+      costs[index] = static_cast<std::uint8_t>(costs[index] | kHitBit);
+      touch.watched_hit.push_back(index);
+    }
+    if (in_range)
+    {
+      costs[index] = LETHAL_OBSTACLE;
+      touch.marked.push_back(index);
+    }
   }
   if (!touch.origin_in_map)
   {

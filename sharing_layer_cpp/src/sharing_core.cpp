@@ -234,6 +234,22 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         in_view.push_back(&obstacle);
         const std::vector<std::uint32_t>& present = obstacle.cells.present();
         watch.cells.insert(watch.cells.end(), present.begin(), present.end());
+        if (!present.empty())  // the bounding box of its present cells (sorted: first and last give the rows)
+        {
+          CellRect box{ std::numeric_limits<int>::max(), 0, std::numeric_limits<int>::min(), 0 };
+          unsigned int mx = 0, my = 0;
+          g.indexToCells(present.front(), mx, my);
+          box.min_y = static_cast<int>(my);
+          g.indexToCells(present.back(), mx, my);
+          box.max_y = static_cast<int>(my);
+          for (std::uint32_t index : present)
+          {
+            const int x = static_cast<int>(index % g.size_x);
+            box.min_x = std::min(box.min_x, x);
+            box.max_x = std::max(box.max_x, x);
+          }
+          watch.regions.push_back(box);
+        }
       }
     }
   }
@@ -257,6 +273,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         if ((wx - ox) * (wx - ox) + (wy - oy) * (wy - oy) <= reach_sq)
         {
           watch.cells.push_back(it->first);
+          watch.regions.push_back(CellRect{ static_cast<int>(mx), static_cast<int>(my), static_cast<int>(mx),
+                                            static_cast<int>(my) });
         }
       }
       ++it;

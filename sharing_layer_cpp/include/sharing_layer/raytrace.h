@@ -74,40 +74,52 @@ inline void raytraceLine(Action& at, unsigned int x0, unsigned int y0, unsigned 
 }
 
 /**
- * @brief bresenham2D with two actions: the first deep_steps cells (steps 0 .. deep_steps - 1 along the
- * dominant axis) get deep, the rest shallow. The cells visited are exactly those of bresenham2D.
+ * @brief bresenham2D with three actions by step along the dominant axis: plain before start_steps, deep from
+ * there before deep_steps, shallow from there before watch_steps, plain again after. The cells visited are
+ * exactly those of bresenham2D.
  */
-template <class DeepAction, class ShallowAction>
-inline void bresenham2DSplit(DeepAction& deep, ShallowAction& shallow, unsigned int abs_da, unsigned int abs_db,
-                             int error_b, int offset_a, int offset_b, std::uint32_t offset, unsigned int max_length,
-                             unsigned int deep_steps)
+template <class DeepAction, class ShallowAction, class PlainAction>
+inline void bresenham2DSplit(DeepAction& deep, ShallowAction& shallow, PlainAction& plain, unsigned int abs_da,
+                             unsigned int abs_db, int error_b, int offset_a, int offset_b, std::uint32_t offset,
+                             unsigned int max_length, unsigned int start_steps, unsigned int deep_steps,
+                             unsigned int watch_steps)
 {
   const unsigned int end = std::min(max_length, abs_da);
-  const unsigned int split = std::min(end, deep_steps);
+  const unsigned int s0 = std::min(end, start_steps);
+  const unsigned int s1 = std::min(end, std::max(s0, deep_steps));
+  const unsigned int s2 = std::min(end, std::max(s1, watch_steps));
   unsigned int i = 0;
-  for (; i < split; ++i)
+#define SHARING_LAYER_BRESENHAM_STEP(action)                                                                          \
+  action(offset);                                                                                                    \
+  offset += offset_a;                                                                                                \
+  error_b += abs_db;                                                                                                 \
+  if (static_cast<unsigned int>(error_b) >= abs_da)                                                                  \
+  {                                                                                                                  \
+    offset += offset_b;                                                                                              \
+    error_b -= abs_da;                                                                                               \
+  }
+  for (; i < s0; ++i)
   {
-    deep(offset);
-    offset += offset_a;
-    error_b += abs_db;
-    if (static_cast<unsigned int>(error_b) >= abs_da)
-    {
-      offset += offset_b;
-      error_b -= abs_da;
-    }
+    SHARING_LAYER_BRESENHAM_STEP(plain)
+  }
+  for (; i < s1; ++i)
+  {
+    SHARING_LAYER_BRESENHAM_STEP(deep)
+  }
+  for (; i < s2; ++i)
+  {
+    SHARING_LAYER_BRESENHAM_STEP(shallow)
   }
   for (; i < end; ++i)
   {
-    shallow(offset);
-    offset += offset_a;
-    error_b += abs_db;
-    if (static_cast<unsigned int>(error_b) >= abs_da)
-    {
-      offset += offset_b;
-      error_b -= abs_da;
-    }
+    SHARING_LAYER_BRESENHAM_STEP(plain)
   }
-  if (end < deep_steps)
+#undef SHARING_LAYER_BRESENHAM_STEP
+  if (end < start_steps || end >= watch_steps)
+  {
+    plain(offset);
+  }
+  else if (end < deep_steps)
   {
     deep(offset);
   }
@@ -117,15 +129,29 @@ inline void bresenham2DSplit(DeepAction& deep, ShallowAction& shallow, unsigned 
   }
 }
 
+/// @return how many steps along the dominant axis lie within distance (cells) of the start: the steps i with
+/// i * dist / abs_da <= distance; 0 for a negative distance
+inline unsigned int stepsWithin(double distance, unsigned int abs_da, double dist)
+{
+  if (distance < 0.0)
+  {
+    return 0;
+  }
+  // (1e-9: a cell exactly at the distance counts despite rounding in the caller's arithmetic)
+  const double steps = dist == 0.0 ? 1.0 : std::floor(distance * abs_da / dist + 1e-9) + 1.0;
+  return steps >= static_cast<double>(UINT_MAX) ? UINT_MAX : static_cast<unsigned int>(steps);
+}
+
 /**
- * @brief raytraceLine whose cells up to deep_until cells (Euclidean distance from the start cell's centre,
- * in cells) get deep and the cells after that get shallow. Visits the same cells as raytraceLine.
- * A negative deep_until makes every cell shallow.
+ * @brief raytraceLine with three actions by distance from the start cell's centre (in cells): plain before
+ * watch_from, deep up to deep_until, shallow up to watch_until, plain beyond. Visits the same cells as
+ * raytraceLine. Only cells between watch_from and watch_until may hold flags the deep and shallow actions
+ * read; a negative deep_until makes no cell deep.
  */
-template <class DeepAction, class ShallowAction>
-inline void raytraceLineSplit(DeepAction& deep, ShallowAction& shallow, unsigned int x0, unsigned int y0,
-                              unsigned int x1, unsigned int y1, unsigned int size_x, unsigned int max_length,
-                              double deep_until)
+template <class DeepAction, class ShallowAction, class PlainAction>
+inline void raytraceLineSplit(DeepAction& deep, ShallowAction& shallow, PlainAction& plain, unsigned int x0,
+                              unsigned int y0, unsigned int x1, unsigned int y1, unsigned int size_x,
+                              unsigned int max_length, double watch_from, double deep_until, double watch_until)
 {
   const int dx = static_cast<int>(x1) - static_cast<int>(x0);
   const int dy = static_cast<int>(y1) - static_cast<int>(y0);
@@ -135,28 +161,24 @@ inline void raytraceLineSplit(DeepAction& deep, ShallowAction& shallow, unsigned
   const int offset_dy = signOf(dy) * static_cast<int>(size_x);
   const std::uint32_t offset = y0 * size_x + x0;
 
-  const double dist = std::hypot(static_cast<double>(dx), static_cast<double>(dy));
+  const double dist = std::sqrt(static_cast<double>(dx) * dx + static_cast<double>(dy) * dy);
   const double scale = (dist == 0.0) ? 1.0 : std::min(1.0, max_length / dist);
   const unsigned int abs_da = std::max(abs_dx, abs_dy);
-  // Step i along the dominant axis lies i * dist / abs_da cells from the start.
-  unsigned int deep_steps = 0;
-  if (deep_until >= 0.0)
-  {
-    // (1e-9: a cell exactly deep_until away is deep despite rounding in the caller's arithmetic)
-    const double steps = dist == 0.0 ? 1.0 : std::floor(deep_until * abs_da / dist + 1e-9) + 1.0;
-    deep_steps = steps >= static_cast<double>(UINT_MAX) ? UINT_MAX : static_cast<unsigned int>(steps);
-  }
+  // Steps strictly before watch_from are plain: stepsWithin of a hair less.
+  const unsigned int start_steps = watch_from <= 0.0 ? 0 : stepsWithin(watch_from - 1e-6, abs_da, dist);
+  const unsigned int watch_steps = stepsWithin(watch_until, abs_da, dist);
+  const unsigned int deep_steps = std::min(watch_steps, stepsWithin(deep_until, abs_da, dist));
 
   if (abs_dx >= abs_dy)
   {
     const int error_y = static_cast<int>(abs_dx / 2);
-    bresenham2DSplit(deep, shallow, abs_dx, abs_dy, error_y, offset_dx, offset_dy, offset,
-                     static_cast<unsigned int>(scale * abs_dx), deep_steps);
+    bresenham2DSplit(deep, shallow, plain, abs_dx, abs_dy, error_y, offset_dx, offset_dy, offset,
+                     static_cast<unsigned int>(scale * abs_dx), start_steps, deep_steps, watch_steps);
     return;
   }
   const int error_x = static_cast<int>(abs_dy / 2);
-  bresenham2DSplit(deep, shallow, abs_dy, abs_dx, error_x, offset_dy, offset_dx, offset,
-                   static_cast<unsigned int>(scale * abs_dy), deep_steps);
+  bresenham2DSplit(deep, shallow, plain, abs_dy, abs_dx, error_x, offset_dy, offset_dx, offset,
+                   static_cast<unsigned int>(scale * abs_dy), start_steps, deep_steps, watch_steps);
 }
 
 /// @brief Action that replaces every visited cell's value through a 256-entry table.

@@ -26,6 +26,9 @@ struct ScanWatch
   /// neighbouring points on each side (observation order = scan order), so beams at an occlusion edge,
   /// which localisation error moves through the cells hidden behind a corner, see nothing free there.
   unsigned int free_neighbours = 0;
+  /// Optional: rectangles that together cover every watched cell (e.g. the obstacles' rectangles). Beams
+  /// are tested against these instead of against each cell, which is cheaper when they hold many cells.
+  std::vector<CellRect> regions;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);
