@@ -108,6 +108,7 @@ void SharingLayer::onInitialize()
   private_nh.param("clearing_time", params_.clearing_time, 1.0);
   private_nh.param("trigger_memory", params_.trigger_memory, 30.0);
   private_nh.param("trigger_radius", params_.trigger_radius, 4.0);
+  private_nh.param("memory_on_stuck_feedback", params_.memory_on_stuck_feedback, false);
   // The robot's inscribed radius from its footprint (onFootprintChanged) unless set here.
   inscribed_from_footprint_ = !private_nh.hasParam("inscribed_radius");
   const double footprint_inscribed = layered_costmap_->getInscribedRadius();

@@ -256,7 +256,8 @@ PYBIND11_MODULE(_sharing_core, m)
                        unsigned int cluster_gap, std::size_t min_cluster_cells, double rectangle_padding,
                        std::size_t max_update_cells, const std::string& robot_name, double clearing_margin,
                        unsigned int clearing_scans, double clearing_time, unsigned int clearing_neighbours,
-                       double trigger_memory, double trigger_radius, double inscribed_radius) {
+                       double trigger_memory, double trigger_radius, double inscribed_radius,
+                       bool memory_on_stuck_feedback) {
              if (static_occupied_cost < 1 || static_occupied_cost > 255)
              {
                throw py::value_error("static_occupied_cost must be 1..255, got " +
@@ -283,6 +284,7 @@ PYBIND11_MODULE(_sharing_core, m)
              p.trigger_memory = trigger_memory;
              p.trigger_radius = trigger_radius;
              p.inscribed_radius = inscribed_radius;
+             p.memory_on_stuck_feedback = memory_on_stuck_feedback;
              p.validate();
              return p;
            }),
@@ -293,7 +295,8 @@ PYBIND11_MODULE(_sharing_core, m)
            py::arg("rectangle_padding") = 0.0, py::arg("max_update_cells") = 1000000,
            py::arg("robot_name") = "robot", py::arg("clearing_margin") = 0.3, py::arg("clearing_scans") = 3,
            py::arg("clearing_time") = 1.0, py::arg("clearing_neighbours") = 8, py::arg("trigger_memory") = 30.0,
-           py::arg("trigger_radius") = 4.0, py::arg("inscribed_radius") = 0.25)
+           py::arg("trigger_radius") = 4.0, py::arg("inscribed_radius") = 0.25,
+           py::arg("memory_on_stuck_feedback") = false)
       .def_property_readonly("obstacle_range", [](const LayerParams& p) { return p.limits.obstacle_range; })
       .def_property_readonly("raytrace_range", [](const LayerParams& p) { return p.limits.raytrace_range; })
       .def_readonly("static_tolerance", &LayerParams::static_tolerance)
@@ -305,7 +308,8 @@ PYBIND11_MODULE(_sharing_core, m)
       .def_readonly("clearing_neighbours", &LayerParams::clearing_neighbours)
       .def_readonly("trigger_memory", &LayerParams::trigger_memory)
       .def_readonly("trigger_radius", &LayerParams::trigger_radius)
-      .def_readonly("inscribed_radius", &LayerParams::inscribed_radius);
+      .def_readonly("inscribed_radius", &LayerParams::inscribed_radius)
+      .def_readonly("memory_on_stuck_feedback", &LayerParams::memory_on_stuck_feedback);
 
   py::class_<ObstacleUpdate>(m, "ObstacleUpdate", "Value of one sharing_msgs/SharedObstacle")
       .def(py::init([](const std::string& uuid, const py::object& marked, const py::object& cleared,
@@ -393,8 +397,9 @@ PYBIND11_MODULE(_sharing_core, m)
            "Clear and mark one observation ((N, 3) points in the grid frame); returns a ScanOutcome")
       .def("signal_stuck", &SharingCore::signalStuck, py::arg("now"),
            "A cannot-get-past signal; True when it starts a burst")
-      .def("propose", &SharingCore::propose, py::arg("robot_x"), py::arg("robot_y"),
-           "Proposals from the shareable cells and the remembered cells within trigger_radius")
+      .def("propose", &SharingCore::propose, py::arg("robot_x"), py::arg("robot_y"), py::arg("use_memory") = false,
+           "Proposals from the shareable cells (with use_memory also the remembered cells within trigger_radius "
+           "beyond obstacle_range)")
       .def("set_unknown_map",
            [](SharingCore& core, const py::object& mask) {
              if (mask.is_none())

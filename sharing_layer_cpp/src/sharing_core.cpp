@@ -489,10 +489,10 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
   shareable_.erase(keep_end, shareable_.end());
 }
 
-std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_y) const
+std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_y, bool use_memory) const
 {
   std::vector<std::uint32_t> cells(shareable_);
-  if (!memory_.empty() && std::isfinite(robot_x) && std::isfinite(robot_y))
+  if (use_memory && !memory_.empty() && std::isfinite(robot_x) && std::isfinite(robot_y))
   {
     const GridGeometry& g = geometry();
     const double radius_sq = params_.trigger_radius * params_.trigger_radius;
@@ -537,9 +537,9 @@ std::vector<Proposal> SharingCore::group(const std::vector<std::uint32_t>& cells
   return proposeBySectors(geometry(), cells, robot_x, robot_y, params_.rectangle_padding);
 }
 
-std::vector<Proposal> SharingCore::propose(double robot_x, double robot_y) const
+std::vector<Proposal> SharingCore::propose(double robot_x, double robot_y, bool use_memory) const
 {
-  return group(candidates(robot_x, robot_y), robot_x, robot_y);
+  return group(candidates(robot_x, robot_y, use_memory), robot_x, robot_y);
 }
 
 namespace
@@ -564,7 +564,7 @@ std::string describeProposals(const std::vector<Proposal>& proposals)
 }
 }  // namespace
 
-void SharingCore::explainNothing(TriggerReport& report, double robot_x, double robot_y) const
+void SharingCore::explainNothing(TriggerReport& report, double robot_x, double robot_y, bool use_memory) const
 {
   const GridGeometry& g = geometry();
   std::size_t near = 0, near_shared = 0, far = 0;
@@ -591,7 +591,16 @@ void SharingCore::explainNothing(TriggerReport& report, double robot_x, double r
       nearest = std::min(nearest, d);
     }
   }
-  if (!candidates(robot_x, robot_y).empty())
+  if (!use_memory && candidates(robot_x, robot_y, true).size() > shareable_.size())
+  {
+    report.reason = TriggerReason::OutOfRange;
+    report.message += format("nothing proposed: the recently marked cells near the robot lie beyond obstacle_range "
+                             "%.2f m of the current view, and ",
+                             params_.limits.obstacle_range, 0.0);
+    report.message += std::string(triggerSourceName(report.source)) +
+                      " does not use the trigger memory (memory_on_stuck_feedback)";
+  }
+  else if (!candidates(robot_x, robot_y, use_memory).empty())
   {
     report.reason = TriggerReason::TooSmall;
     report.message += "nothing proposed: the candidate cells form groups smaller than min_cluster_cells " +
@@ -653,14 +662,16 @@ TriggerReport SharingCore::trigger(TriggerSource source, double now_s, double ro
                              params_.trigger_debounce, 0.0);
     return report;
   }
-  report.proposals = propose(robot_x, robot_y);
+  const bool use_memory = source == TriggerSource::RecoveryStatus || source == TriggerSource::Manual ||
+                          (source == TriggerSource::StuckFeedback && params_.memory_on_stuck_feedback);
+  report.proposals = propose(robot_x, robot_y, use_memory);
   if (!report.proposals.empty())
   {
     report.reason = TriggerReason::Proposed;
     report.message += describeProposals(report.proposals);
     return report;
   }
-  explainNothing(report, robot_x, robot_y);
+  explainNothing(report, robot_x, robot_y, use_memory);
   return report;
 }
 
@@ -799,7 +810,7 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
     return report;
   }
   // The clusters of candidate cells that touch the plan ahead.
-  const std::vector<std::uint32_t> cells = candidates(robot_x, robot_y);
+  const std::vector<std::uint32_t> cells = candidates(robot_x, robot_y, true);
   for (Proposal& proposal : proposeByClusters(g, cells, params_.cluster_gap, params_.min_cluster_cells,
                                               params_.rectangle_padding))
   {

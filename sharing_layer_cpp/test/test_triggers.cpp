@@ -242,18 +242,44 @@ TEST(TriggerMemory, CellsAreForgottenAfterTriggerMemoryOrBeyondTriggerRadius)
   ASSERT_FALSE(core.rememberedCells().empty());
   // 3.5 m away: remembered, but beyond trigger_radius.
   core.processScan(world.scan(1.5, 5.0, 0.0), 2.0);
-  TriggerReport report = core.trigger(TriggerSource::StuckFeedback, 2.0, 1.5, 5.0);
+  TriggerReport report = core.trigger(TriggerSource::RecoveryStatus, 2.0, 1.5, 5.0);
   EXPECT_EQ(TriggerReason::OutOfRange, report.reason) << report.message;
   EXPECT_NE(report.message.find("trigger_radius"), std::string::npos) << report.message;
   // 2.5 m away but 6 s later: forgotten (the scan, facing the west wall, marks only the wall).
   core.processScan(world.scan(2.52, 5.0, 3.14159), 7.5);
   EXPECT_TRUE(core.rememberedCells().empty());
-  report = core.trigger(TriggerSource::StuckFeedback, 7.5, 2.52, 5.0);
+  report = core.trigger(TriggerSource::RecoveryStatus, 7.5, 2.52, 5.0);
   EXPECT_EQ(TriggerReason::Static, report.reason) << report.message;
   // Nothing in range at all.
   core.processScan(world.scan(5.0, 8.0, 0.0, 0.0, 0.0, 0.0, 1.0), 8.0);  // a 1 m laser sees nothing
-  report = core.trigger(TriggerSource::StuckFeedback, 20.0, 5.0, 8.0);
+  report = core.trigger(TriggerSource::RecoveryStatus, 20.0, 5.0, 8.0);
   EXPECT_EQ(TriggerReason::NothingMarked, report.reason) << report.message;
+}
+
+TEST(TriggerMemory, StuckFeedbackKeepsTheCurrentViewSoABystanderIsNotShared)
+{
+  // Thesis Test 3's start: another robot waits 1.4 m beside this one. This robot drives off and gets stuck at
+  // a block 3.8 m from the waiting robot; stuck_feedback comes at once, with the block in view. Only the block
+  // is proposed; the waiting robot, remembered from the start, is not (unless memory_on_stuck_feedback).
+  SimWorld world = walledWorld();
+  world.box(6.25, 1.75, 6.75, 2.25);  // the waiting robot
+  world.box(3.0, 4.8, 5.0, 5.1);      // the block across the corridor
+  for (bool memory : { false, true })
+  {
+    LayerParams p = defaults();
+    p.memory_on_stuck_feedback = memory;
+    SharingCore core = makeCore(p);
+    double now = 1.0;
+    for (double t = 0.0; t <= 1.0; t += 0.05)  // from (5.0, 2.0) to (4.0, 3.9), facing the block
+    {
+      core.processScan(world.scan(5.0 - t, 2.0 + 1.9 * t, 1.5708), now += 0.1);
+    }
+    const TriggerReport report = core.trigger(TriggerSource::StuckFeedback, now, 4.0, 3.9);
+    ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
+    // Without the memory only the block; with it the waiting robot comes in too (the test can fail).
+    EXPECT_EQ(!memory, allWithin(allCells(report.proposals), 3.0, 4.75, 5.0, 5.15))
+        << "memory_on_stuck_feedback " << memory << ": " << report.message;
+  }
 }
 
 TEST(TriggerMemory, RemovedObstacleLeavesTheMemoryOnEvidence)

@@ -38,6 +38,10 @@ struct LayerParams
   // Trigger memory: recently marked non-static cells, for triggers that come after the robot backed off.
   double trigger_memory = 30.0;            ///< seconds a marked cell is remembered (0: no memory)
   double trigger_radius = 4.0;             ///< a trigger proposes remembered cells within this distance (m) of the robot
+  /// stuck_feedback comes at the moment of failure, with the block in view (fleet_nav): by default only
+  /// recovery_status and manual triggers (and plan_blocked's clusters on the plan) use the memory, which
+  /// otherwise also proposes bystanders such as another robot waiting within trigger_radius
+  bool memory_on_stuck_feedback = false;
   // Plan-blocked trigger.
   double inscribed_radius = 0.25;          ///< new cells within this distance (m) of a plan pose ahead block the plan
 
@@ -162,16 +166,17 @@ public:
   bool signalStuck(double now_s) { return trigger_.signal(now_s); }
 
   /**
-   * @brief Groups the current shareable cells and the remembered cells within trigger_radius of the robot
-   * (marked within trigger_memory seconds of the last scan) into proposals, with the configured strategy.
-   * Within obstacle_range of the last scan's origin the current view decides (the thesis rule); remembered
-   * cells are added only beyond it, where the robot can no longer mark them.
+   * @brief Groups the current shareable cells into proposals, with the configured strategy (the thesis);
+   * with use_memory also the remembered cells within trigger_radius of the robot (marked within
+   * trigger_memory seconds of the last scan) that lie beyond obstacle_range of the last scan's origin,
+   * where the robot can no longer mark them (within it the current view decides).
    */
-  std::vector<Proposal> propose(double robot_x, double robot_y) const;
+  std::vector<Proposal> propose(double robot_x, double robot_y, bool use_memory = false) const;
 
   /**
    * @brief A stuck trigger (stuck_feedback, recovery_status, manual): debounced like signalStuck (one
-   * window for all these sources), then propose(); the report says what was proposed or why nothing.
+   * window for all these sources), then propose(), with the trigger memory for recovery_status and manual
+   * (and stuck_feedback when memory_on_stuck_feedback); the report says what was proposed or why nothing.
    */
   TriggerReport trigger(TriggerSource source, double now_s, double robot_x, double robot_y);
 
@@ -232,10 +237,10 @@ private:
   void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, const Observation& observation,
                 double now_s);
   /// @brief Shareable cells plus remembered cells within trigger_radius of (x, y), not static, not shared.
-  std::vector<std::uint32_t> candidates(double robot_x, double robot_y) const;
+  std::vector<std::uint32_t> candidates(double robot_x, double robot_y, bool use_memory) const;
   std::vector<Proposal> group(const std::vector<std::uint32_t>& cells, double robot_x, double robot_y) const;
   /// @brief Fills reason and message for a trigger that proposed nothing.
-  void explainNothing(TriggerReport& report, double robot_x, double robot_y) const;
+  void explainNothing(TriggerReport& report, double robot_x, double robot_y, bool use_memory) const;
   /// @brief Indexes of plan poses ahead of the robot that lie within reach of it.
   std::vector<std::size_t> planAhead(double robot_x, double robot_y, double reach) const;
   bool nearPlan(std::uint32_t index, const std::vector<std::size_t>& ahead) const;
