@@ -98,7 +98,7 @@ void SharingLayer::onInitialize()
   params_.max_update_cells = static_cast<std::size_t>(std::max(0, max_cells));
   private_nh.param("rectangle_padding", params_.rectangle_padding, 0.0);
   // Issue 12: evidence-based clearing, trigger memory, plan-blocked trigger.
-  private_nh.param("clearing_margin", params_.clearing_margin, 0.3);
+  private_nh.param("clearing_margin", params_.clearing_margin, 0.1);
   int clearing_scans = 3, clearing_neighbours = 8;
   private_nh.param("clearing_scans", clearing_scans, 3);
   private_nh.param("clearing_neighbours", clearing_neighbours, 8);

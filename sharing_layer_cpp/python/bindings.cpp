@@ -293,7 +293,7 @@ PYBIND11_MODULE(_sharing_core, m)
            py::arg("static_occupied_cost") = 254, py::arg("proposal_strategy") = "sectors",
            py::arg("trigger_debounce") = 2.0, py::arg("cluster_gap") = 1, py::arg("min_cluster_cells") = 1,
            py::arg("rectangle_padding") = 0.0, py::arg("max_update_cells") = 1000000,
-           py::arg("robot_name") = "robot", py::arg("clearing_margin") = 0.3, py::arg("clearing_scans") = 3,
+           py::arg("robot_name") = "robot", py::arg("clearing_margin") = 0.1, py::arg("clearing_scans") = 3,
            py::arg("clearing_time") = 1.0, py::arg("clearing_neighbours") = 8, py::arg("trigger_memory") = 30.0,
            py::arg("trigger_radius") = 4.0, py::arg("inscribed_radius") = 0.25,
            py::arg("memory_on_stuck_feedback") = false)

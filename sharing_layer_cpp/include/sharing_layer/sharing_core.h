@@ -31,7 +31,7 @@ struct LayerParams
   std::size_t max_update_cells = 1000000;  ///< larger updates are rejected
   std::string robot_name = "robot";        ///< source of this robot's updates
   // Evidence-based clearing of shared cells and remembered cells (the obstacle grid keeps costmap_2d's rules).
-  double clearing_margin = 0.3;            ///< a beam is evidence of free space only when it ends this far (m) beyond the cell
+  double clearing_margin = 0.1;            ///< a beam is evidence of free space only when it ends this far (m) beyond the cell
   unsigned int clearing_scans = 3;         ///< scans with such evidence, without a sign of occupancy in between, that clear a cell
   double clearing_time = 1.0;              ///< ... and the time (s) from the first to the last of them
   unsigned int clearing_neighbours = 8;    ///< shadow filter: beams on each side whose endpoints also bound the evidence
