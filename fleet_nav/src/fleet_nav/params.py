@@ -9,7 +9,8 @@ Lookup order for a costmap key K: ``global_costmap/K``, ``global_costmap/inflati
 (inflation keys only), then ``K``. Local-planner keys come from ``TrajectoryPlannerROS/``, then
 ``DWAPlannerROS/``, then the top level. Layer parameters of the sharing layer come from
 ``sharing/`` or ``sharing_layer/`` (static_tolerance, proposal_strategy, trigger_debounce,
-cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost).
+cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost, clearing_margin,
+clearing_scans, clearing_time, clearing_neighbours, trigger_memory, trigger_radius, memory_on_stuck_feedback).
 """
 import ast
 import math
@@ -19,7 +20,9 @@ from typing import Dict, List, Tuple
 from fleet_nav.errors import ParameterError
 
 SHARING_KEYS = ("static_tolerance", "proposal_strategy", "trigger_debounce", "cluster_gap",
-                "min_cluster_cells", "rectangle_padding", "max_update_cells", "static_occupied_cost")
+                "min_cluster_cells", "rectangle_padding", "max_update_cells", "static_occupied_cost",
+                "clearing_margin", "clearing_scans", "clearing_time", "clearing_neighbours", "trigger_memory",
+                "trigger_radius", "memory_on_stuck_feedback")
 
 
 def _flatten(tree, prefix=""):
