@@ -772,7 +772,13 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
     return report;
   }
   const GridGeometry& g = geometry();
-  const double range_sq = params_.limits.obstacle_range * params_.limits.obstacle_range;
+  // obstacle_range counts from the laser that marked the cells: a laser ahead of the robot's centre
+  // marks a cell first at obstacle_range from itself, and once marked the cell is no longer new.
+  const bool laser_known = std::isfinite(last_origin_x_) && std::isfinite(last_origin_y_);
+  const double from_x = laser_known ? last_origin_x_ : robot_x;
+  const double from_y = laser_known ? last_origin_y_ : robot_y;
+  const double reach = params_.limits.obstacle_range + 0.5 * g.resolution * std::sqrt(2.0);
+  const double range_sq = reach * reach;
   std::size_t blocking = 0, blocking_shared = 0;
   for (std::uint32_t index : last_new_marked_)
   {
@@ -780,7 +786,7 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
     g.indexToCells(index, mx, my);
     double wx = 0.0, wy = 0.0;
     g.mapToWorld(mx, my, wx, wy);
-    if ((wx - robot_x) * (wx - robot_x) + (wy - robot_y) * (wy - robot_y) > range_sq || !nearPlan(index, ahead))
+    if ((wx - from_x) * (wx - from_x) + (wy - from_y) * (wy - from_y) > range_sq || !nearPlan(index, ahead))
     {
       continue;
     }

@@ -387,6 +387,25 @@ TEST(PlanTrigger, NewCellsOnThePlanAheadProposeTheClusterOnThePlan)
   }
 }
 
+TEST(PlanTrigger, FiresWhenTheLaserSitsAheadOfTheRobotCentre)
+{
+  // Stage's PR2 and most AGVs carry the laser ahead of the base: cells are first marked at
+  // obstacle_range from the laser, which is farther than obstacle_range from the robot's centre.
+  // Seen again they are no longer new, so the range must be measured from the laser.
+  SimWorld world = walledWorld();
+  world.box(5.02, 4.6, 5.32, 5.4);
+  SharingCore core = makeCore();
+  core.setPlan(line(1.0, 5.0, 9.0, 5.0));
+  double now = 1.0;
+  TriggerReport report;
+  for (double x = 1.0; x < 4.0 && report.reason == TriggerReason::None; x += 0.05)
+  {
+    core.processScan(world.scan(x + 0.3, 5.0, 0.0), now += 0.1);
+    report = core.checkPlan(x, 5.0, now);
+  }
+  ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
+}
+
 TEST(PlanTrigger, CellsBesideOrBehindThePlanOrBeyondRangeDoNotFire)
 {
   SimWorld world = walledWorld();
