@@ -132,6 +132,8 @@ class NavParams:
     collision_horizon: float = 0.5
     stall_time: float = 1.5
     sharing_enabled: bool = True
+    # the sharing layer's plan-blocked trigger (the plugin's plan_topics; empty there = off)
+    plan_trigger: bool = True
     sharing: Dict[str, object] = field(default_factory=dict)
     map_wait_log_period: float = 5.0
 
@@ -282,6 +284,7 @@ class NavParams:
                      "map_wait_log_period"):
             num(name, take([name], getattr(cls, name)))
         flag("sharing_enabled", take(["sharing_enabled"], True))
+        flag("plan_trigger", take(["sharing/plan_trigger", "sharing_layer/plan_trigger"], True))
         sharing = {}
         for key in SHARING_KEYS:
             value, _ = take(["sharing/" + key, "sharing_layer/" + key], None)
