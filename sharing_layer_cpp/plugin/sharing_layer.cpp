@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
 #include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/point_cloud2_iterator.h>
@@ -96,6 +97,26 @@ void SharingLayer::onInitialize()
   params_.min_cluster_cells = static_cast<std::size_t>(std::max(0, min_cells));
   params_.max_update_cells = static_cast<std::size_t>(std::max(0, max_cells));
   private_nh.param("rectangle_padding", params_.rectangle_padding, 0.0);
+  // Issue 12: evidence-based clearing, trigger memory, plan-blocked trigger.
+  private_nh.param("clearing_margin", params_.clearing_margin, 0.1);
+  int clearing_scans = 3, clearing_neighbours = 8;
+  private_nh.param("clearing_scans", clearing_scans, 3);
+  private_nh.param("clearing_neighbours", clearing_neighbours, 8);
+  // Negative values stay out of range after the cast (validate() names them), instead of wrapping.
+  params_.clearing_scans = clearing_scans < 0 ? 0u : static_cast<unsigned int>(clearing_scans);
+  params_.clearing_neighbours = clearing_neighbours < 0 ? 100000u : static_cast<unsigned int>(clearing_neighbours);
+  private_nh.param("clearing_time", params_.clearing_time, 1.0);
+  private_nh.param("trigger_memory", params_.trigger_memory, 30.0);
+  private_nh.param("trigger_radius", params_.trigger_radius, 4.0);
+  private_nh.param("memory_on_stuck_feedback", params_.memory_on_stuck_feedback, false);
+  // The robot's inscribed radius from its footprint (onFootprintChanged) unless set here.
+  inscribed_from_footprint_ = !private_nh.hasParam("inscribed_radius");
+  const double footprint_inscribed = layered_costmap_->getInscribedRadius();
+  private_nh.param("inscribed_radius", params_.inscribed_radius, footprint_inscribed > 0.0 ? footprint_inscribed : 0.25);
+  std::string plan_topics;
+  private_nh.param("plan_topics", plan_topics, std::string("move_base/NavfnROS/plan move_base/GlobalPlanner/plan"));
+  std::string map_topic;
+  private_nh.param("map_topic", map_topic, std::string("map"));
   std::string robot_name = ros::this_node::getNamespace();
   robot_name.erase(std::remove(robot_name.begin(), robot_name.end(), '/'), robot_name.end());
   private_nh.param("robot_name", params_.robot_name, robot_name.empty() ? std::string("robot") : robot_name);
@@ -116,6 +137,25 @@ void SharingLayer::onInitialize()
   recovery_sub_ = robot_nh.subscribe("move_base/recovery_status", 10, &SharingLayer::recoveryCallback, this);
   shared_sub_ = robot_nh.subscribe("shared_obstacles", 100, &SharingLayer::sharedCallback, this);
   expired_sub_ = robot_nh.subscribe("expired_obstacles", 100, &SharingLayer::expiredCallback, this);
+  // Whichever of the planners publishes; an empty list (or "none") switches the plan trigger off.
+  std::istringstream topics(plan_topics);
+  for (std::string topic; topics >> topic;)
+  {
+    if (topic != "none")
+    {
+      plan_subs_.push_back(robot_nh.subscribe(topic, 1, &SharingLayer::planCallback, this));
+    }
+  }
+  if (!map_topic.empty() && map_topic != "none")
+  {
+    map_sub_ = robot_nh.subscribe(map_topic, 1, &SharingLayer::mapCallback, this);
+  }
+  ROS_INFO("SharingLayer %s (%s): clearing after %u scans over %.1f s seen free %.2f m before the beam ends; "
+           "trigger memory %.1f s within %.2f m; plan trigger on [%s] within %.2f m of the plan; unknown cells "
+           "from [%s]",
+           name_.c_str(), params_.robot_name.c_str(), params_.clearing_scans, params_.clearing_time,
+           params_.clearing_margin, params_.trigger_memory, params_.trigger_radius, plan_topics.c_str(),
+           params_.inscribed_radius, map_topic.c_str());
   rebuildCore();
 }
 
@@ -135,6 +175,7 @@ void SharingLayer::rebuildCore()
     return;  // the static layer has no map yet; matchSize() calls again
   }
   core_.reset(new SharingCore(masterGeometry(), params_));
+  applyUnknownMap();
   // LayeredCostmap::resizeMap() blanks the master before calling matchSize(); the static layer writes
   // its map into the master only in the next updateCosts(), before ours. Take the a-priori map there.
   static_pending_ = true;
@@ -147,9 +188,29 @@ void SharingLayer::matchSize()
   rebuildCore();
 }
 
+void SharingLayer::onFootprintChanged()
+{
+  ObstacleLayer::onFootprintChanged();
+  const double inscribed = layered_costmap_->getInscribedRadius();
+  if (!inscribed_from_footprint_ || !(inscribed > 0.0) || !std::isfinite(inscribed))
+  {
+    return;
+  }
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  params_.inscribed_radius = inscribed;
+  if (core_)
+  {
+    core_->setInscribedRadius(inscribed);
+  }
+}
+
 void SharingLayer::stuckCallback(const std_msgs::Empty::ConstPtr&)
 {
   std::lock_guard<std::mutex> lock(core_mutex_);
+  if (!stuck_pending_)
+  {
+    stuck_source_ = TriggerSource::StuckFeedback;
+  }
   stuck_pending_ = true;
   stuck_stamp_ = ros::Time::now();
 }
@@ -157,8 +218,108 @@ void SharingLayer::stuckCallback(const std_msgs::Empty::ConstPtr&)
 void SharingLayer::recoveryCallback(const ros::MessageEvent<topic_tools::ShapeShifter const>&)
 {
   std::lock_guard<std::mutex> lock(core_mutex_);
+  if (!stuck_pending_)
+  {
+    stuck_source_ = TriggerSource::RecoveryStatus;
+  }
   stuck_pending_ = true;
   stuck_stamp_ = ros::Time::now();
+}
+
+void SharingLayer::planCallback(const nav_msgs::Path::ConstPtr& msg)
+{
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  if (!core_)
+  {
+    return;
+  }
+  const std::string frame = msg->header.frame_id.empty() || msg->header.frame_id[0] != '/' ?
+                                msg->header.frame_id :
+                                msg->header.frame_id.substr(1);
+  if (!msg->poses.empty() && !frame.empty() && frame != global_frame_)
+  {
+    ROS_WARN_THROTTLE(10.0, "SharingLayer (%s): ignoring a plan in frame %s; the plan trigger needs it in %s",
+                      params_.robot_name.c_str(), frame.c_str(), global_frame_.c_str());
+    return;
+  }
+  std::vector<std::pair<double, double>> poses;
+  poses.reserve(msg->poses.size());
+  for (const auto& pose : msg->poses)
+  {
+    poses.emplace_back(pose.pose.position.x, pose.pose.position.y);  // non-finite ones are dropped by the core
+  }
+  core_->setPlan(poses);
+}
+
+void SharingLayer::mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg)
+{
+  if (msg->info.width == 0 || msg->info.height == 0 ||
+      msg->data.size() != static_cast<std::size_t>(msg->info.width) * msg->info.height ||
+      !(msg->info.resolution > 0.0f))
+  {
+    ROS_WARN("SharingLayer (%s): ignoring a map of %ux%u cells with %zu values at resolution %f",
+             params_.robot_name.c_str(), msg->info.width, msg->info.height, msg->data.size(), msg->info.resolution);
+    return;
+  }
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  map_ = msg;
+  applyUnknownMap();
+}
+
+void SharingLayer::applyUnknownMap()
+{
+  if (!core_ || !map_)
+  {
+    return;
+  }
+  // Unknown (-1) cells of the a-priori map, looked up for every master cell through world coordinates, so a
+  // master of another size or origin (a static layer with a different map, rolling window off) still works.
+  const GridGeometry g = core_->geometry();
+  const nav_msgs::MapMetaData& info = map_->info;
+  std::vector<std::uint8_t> unknown(g.cellCount(), 0);
+  std::size_t count = 0;
+  for (unsigned int my = 0; my < g.size_y; ++my)
+  {
+    for (unsigned int mx = 0; mx < g.size_x; ++mx)
+    {
+      double wx = 0.0, wy = 0.0;
+      g.mapToWorld(mx, my, wx, wy);
+      const double fx = (wx - info.origin.position.x) / info.resolution;
+      const double fy = (wy - info.origin.position.y) / info.resolution;
+      if (fx < 0.0 || fy < 0.0 || fx >= info.width || fy >= info.height)
+      {
+        continue;  // outside the map: the static layer's business
+      }
+      const std::size_t index = static_cast<std::size_t>(fy) * info.width + static_cast<std::size_t>(fx);
+      if (map_->data[index] < 0)
+      {
+        unknown[g.getIndex(mx, my)] = 1;
+        ++count;
+      }
+    }
+  }
+  core_->setUnknownMap(unknown.data(), unknown.size());
+  ROS_INFO("SharingLayer (%s): %zu cells of the a-priori map are unknown and never shared",
+           params_.robot_name.c_str(), count);
+}
+
+void SharingLayer::handleTrigger(const TriggerReport& report, double now)
+{
+  if (report.log)
+  {
+    ROS_INFO("SharingLayer (%s): %s [%s]", params_.robot_name.c_str(), report.message.c_str(),
+             triggerReasonName(report.reason));
+  }
+  for (const Proposal& proposal : report.proposals)
+  {
+    ObstacleUpdate value;
+    value.marked = proposal.cells;
+    value.rectangle = proposal.rectangle;
+    value.source = params_.robot_name;
+    value.geometry = core_->geometry();
+    value.stamp = now;
+    proposals_pub_.publish(toMessage(value, global_frame_));
+  }
 }
 
 void SharingLayer::sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& msg)
@@ -234,6 +395,10 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     {
       updates_pub_.publish(toMessage(update, global_frame_));
     }
+    if (!static_pending_)  // before the static map every wall looks new
+    {
+      handleTrigger(core_->checkPlan(robot_x, robot_y, now), now);
+    }
     // Marking reaches obstacle_range, clearing raytrace_range around the sensor.
     const double reach = std::max(params_.limits.obstacle_range, params_.limits.raytrace_range);
     touch(observation.origin_.x - reach, observation.origin_.y - reach, min_x, min_y, max_x, max_y);
@@ -242,19 +407,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
   if (stuck_pending_)
   {
     stuck_pending_ = false;
-    if (core_->signalStuck(stuck_stamp_.toSec()))
-    {
-      for (const Proposal& proposal : core_->propose(robot_x, robot_y))
-      {
-        ObstacleUpdate value;
-        value.marked = proposal.cells;
-        value.rectangle = proposal.rectangle;
-        value.source = params_.robot_name;
-        value.geometry = core_->geometry();
-        value.stamp = now;
-        proposals_pub_.publish(toMessage(value, global_frame_));
-      }
-    }
+    handleTrigger(core_->trigger(stuck_source_, stuck_stamp_.toSec(), robot_x, robot_y), now);
   }
   // Only obstacles that changed grow the bounds; the others are drawn directly in updateCosts.
   const WorldBounds dirty = core_->takeDirtyBounds();

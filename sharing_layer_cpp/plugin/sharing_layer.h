@@ -8,6 +8,8 @@
 #include <vector>
 
 #include <costmap_2d/obstacle_layer.h>
+#include <nav_msgs/OccupancyGrid.h>
+#include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <sharing_msgs/SharedObstacle.h>
 #include <std_msgs/Empty.h>
@@ -24,8 +26,11 @@ namespace sharing_layer
  *
  * Topics (in the robot's namespace): subscribes stuck_feedback (std_msgs/Empty),
  * move_base/recovery_status (any type: each message counts as a stuck signal), shared_obstacles
- * (sharing_msgs/SharedObstacle), expired_obstacles (std_msgs/String); publishes obstacle_proposals and
- * obstacle_updates (sharing_msgs/SharedObstacle).
+ * (sharing_msgs/SharedObstacle), expired_obstacles (std_msgs/String), the global plan (nav_msgs/Path,
+ * ~plan_topics, default move_base/NavfnROS/plan and move_base/GlobalPlanner/plan) for the plan-blocked
+ * trigger, and the a-priori map (nav_msgs/OccupancyGrid, ~map_topic, default map) for its unknown cells;
+ * publishes obstacle_proposals and obstacle_updates (sharing_msgs/SharedObstacle). Every trigger is logged
+ * once at INFO with its source and what it proposed, or why nothing.
  */
 class SharingLayer : public costmap_2d::ObstacleLayer
 {
@@ -39,12 +44,19 @@ public:
   void updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, int min_j, int max_i, int max_j) override;
   void reset() override;
   void matchSize() override;
+  void onFootprintChanged() override;
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
   void recoveryCallback(const ros::MessageEvent<topic_tools::ShapeShifter const>& event);
   void sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& msg);
   void expiredCallback(const std_msgs::String::ConstPtr& msg);
+  void planCallback(const nav_msgs::Path::ConstPtr& msg);
+  void mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg);
+  /// @brief Publishes a trigger's proposals and logs it; call with core_mutex_ held.
+  void handleTrigger(const TriggerReport& report, double now);
+  /// @brief Hands the unknown cells of the last map to the core, in the master's geometry; core_mutex_ held.
+  void applyUnknownMap();
   void rebuildCore();
   GridGeometry masterGeometry() const;
 
@@ -52,6 +64,9 @@ private:
   std::unique_ptr<SharingCore> core_;
   std::mutex core_mutex_;
   bool stuck_pending_ = false;
+  bool inscribed_from_footprint_ = true;  ///< ~inscribed_radius not set: follow the footprint
+  TriggerSource stuck_source_ = TriggerSource::StuckFeedback;
+  nav_msgs::OccupancyGrid::ConstPtr map_;  ///< last a-priori map, for its unknown cells
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
   /// Scans processed while static_pending_: their cells were judged shareable without the static map
   /// (walls too), so they are replayed once it is read. At most kMaxPreStaticScans, the newest.
@@ -65,6 +80,8 @@ private:
   ros::Subscriber recovery_sub_;
   ros::Subscriber shared_sub_;
   ros::Subscriber expired_sub_;
+  std::vector<ros::Subscriber> plan_subs_;
+  ros::Subscriber map_sub_;
 };
 
 }  // namespace sharing_layer

@@ -254,7 +254,10 @@ PYBIND11_MODULE(_sharing_core, m)
       .def(py::init([](double obstacle_range, double raytrace_range, double min_h, double max_h, int static_tolerance,
                        int static_occupied_cost, const std::string& strategy, double trigger_debounce,
                        unsigned int cluster_gap, std::size_t min_cluster_cells, double rectangle_padding,
-                       std::size_t max_update_cells, const std::string& robot_name) {
+                       std::size_t max_update_cells, const std::string& robot_name, double clearing_margin,
+                       unsigned int clearing_scans, double clearing_time, unsigned int clearing_neighbours,
+                       double trigger_memory, double trigger_radius, double inscribed_radius,
+                       bool memory_on_stuck_feedback) {
              if (static_occupied_cost < 1 || static_occupied_cost > 255)
              {
                throw py::value_error("static_occupied_cost must be 1..255, got " +
@@ -274,6 +277,14 @@ PYBIND11_MODULE(_sharing_core, m)
              p.rectangle_padding = rectangle_padding;
              p.max_update_cells = max_update_cells;
              p.robot_name = robot_name;
+             p.clearing_margin = clearing_margin;
+             p.clearing_scans = clearing_scans;
+             p.clearing_time = clearing_time;
+             p.clearing_neighbours = clearing_neighbours;
+             p.trigger_memory = trigger_memory;
+             p.trigger_radius = trigger_radius;
+             p.inscribed_radius = inscribed_radius;
+             p.memory_on_stuck_feedback = memory_on_stuck_feedback;
              p.validate();
              return p;
            }),
@@ -282,12 +293,23 @@ PYBIND11_MODULE(_sharing_core, m)
            py::arg("static_occupied_cost") = 254, py::arg("proposal_strategy") = "sectors",
            py::arg("trigger_debounce") = 2.0, py::arg("cluster_gap") = 1, py::arg("min_cluster_cells") = 1,
            py::arg("rectangle_padding") = 0.0, py::arg("max_update_cells") = 1000000,
-           py::arg("robot_name") = "robot")
+           py::arg("robot_name") = "robot", py::arg("clearing_margin") = 0.1, py::arg("clearing_scans") = 3,
+           py::arg("clearing_time") = 1.0, py::arg("clearing_neighbours") = 8, py::arg("trigger_memory") = 30.0,
+           py::arg("trigger_radius") = 4.0, py::arg("inscribed_radius") = 0.25,
+           py::arg("memory_on_stuck_feedback") = false)
       .def_property_readonly("obstacle_range", [](const LayerParams& p) { return p.limits.obstacle_range; })
       .def_property_readonly("raytrace_range", [](const LayerParams& p) { return p.limits.raytrace_range; })
       .def_readonly("static_tolerance", &LayerParams::static_tolerance)
       .def_readonly("robot_name", &LayerParams::robot_name)
-      .def_readonly("trigger_debounce", &LayerParams::trigger_debounce);
+      .def_readonly("trigger_debounce", &LayerParams::trigger_debounce)
+      .def_readonly("clearing_margin", &LayerParams::clearing_margin)
+      .def_readonly("clearing_scans", &LayerParams::clearing_scans)
+      .def_readonly("clearing_time", &LayerParams::clearing_time)
+      .def_readonly("clearing_neighbours", &LayerParams::clearing_neighbours)
+      .def_readonly("trigger_memory", &LayerParams::trigger_memory)
+      .def_readonly("trigger_radius", &LayerParams::trigger_radius)
+      .def_readonly("inscribed_radius", &LayerParams::inscribed_radius)
+      .def_readonly("memory_on_stuck_feedback", &LayerParams::memory_on_stuck_feedback);
 
   py::class_<ObstacleUpdate>(m, "ObstacleUpdate", "Value of one sharing_msgs/SharedObstacle")
       .def(py::init([](const std::string& uuid, const py::object& marked, const py::object& cleared,
@@ -334,9 +356,22 @@ PYBIND11_MODULE(_sharing_core, m)
       .def_readonly("error", &ApplyResult::error)
       .def("__bool__", [](const ApplyResult& r) { return r.ok; });
 
+  py::class_<TriggerReport>(m, "TriggerReport", "What a trigger did: proposals, or the reason why none")
+      .def_property_readonly("source", [](const TriggerReport& r) { return std::string(triggerSourceName(r.source)); })
+      .def_property_readonly("reason", [](const TriggerReport& r) { return std::string(triggerReasonName(r.reason)); })
+      .def_readonly("log", &TriggerReport::log)
+      .def_readonly("proposals", &TriggerReport::proposals)
+      .def_readonly("message", &TriggerReport::message)
+      .def("__repr__", [](const TriggerReport& r) {
+        return "TriggerReport(" + std::string(triggerSourceName(r.source)) + ", " + triggerReasonName(r.reason) +
+               ", " + std::to_string(r.proposals.size()) + " proposals)";
+      });
+
   py::class_<ScanOutcome>(m, "ScanOutcome")
       .def_property_readonly("marked", [](const ScanOutcome& o) { return toArray(o.touch.marked); })
       .def_property_readonly("watched_cleared", [](const ScanOutcome& o) { return toArray(o.touch.watched_cleared); })
+      .def_property_readonly("watched_free", [](const ScanOutcome& o) { return toArray(o.touch.watched_free); })
+      .def_property_readonly("watched_hit", [](const ScanOutcome& o) { return toArray(o.touch.watched_hit); })
       .def_property_readonly("origin_in_map", [](const ScanOutcome& o) { return o.touch.origin_in_map; })
       .def_property_readonly("rejected_points", [](const ScanOutcome& o) { return o.touch.rejected_points; })
       .def_property_readonly("height_filtered", [](const ScanOutcome& o) { return o.touch.height_filtered; })
@@ -362,7 +397,62 @@ PYBIND11_MODULE(_sharing_core, m)
            "Clear and mark one observation ((N, 3) points in the grid frame); returns a ScanOutcome")
       .def("signal_stuck", &SharingCore::signalStuck, py::arg("now"),
            "A cannot-get-past signal; True when it starts a burst")
-      .def("propose", &SharingCore::propose, py::arg("robot_x"), py::arg("robot_y"))
+      .def("propose", &SharingCore::propose, py::arg("robot_x"), py::arg("robot_y"), py::arg("use_memory") = false,
+           "Proposals from the shareable cells (with use_memory also the remembered cells within trigger_radius "
+           "beyond obstacle_range)")
+      .def("set_unknown_map",
+           [](SharingCore& core, const py::object& mask) {
+             if (mask.is_none())
+             {
+               core.setUnknownMap(nullptr, 0);
+               return;
+             }
+             auto arr = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>::ensure(mask);
+             if (!arr)
+             {
+               throw py::value_error("set_unknown_map: expected an array (non-zero = unknown) or None");
+             }
+             core.setUnknownMap(arr.data(), static_cast<std::size_t>(arr.size()));
+           },
+           py::arg("unknown"),
+           "Where the a-priori map is unknown (size_y x size_x, non-zero = unknown, e.g. OccupancyGrid == -1); "
+           "those cells and cells within static_tolerance of them are never shared. None forgets it")
+      .def("trigger",
+           [](SharingCore& core, const std::string& source, double now, double robot_x, double robot_y) {
+             return core.trigger(parseTriggerSource(source), now, robot_x, robot_y);
+           },
+           py::arg("source"), py::arg("now"), py::arg("robot_x"), py::arg("robot_y"),
+           "A stuck trigger (source 'stuck_feedback', 'recovery_status' or 'manual'): debounced, then proposals "
+           "or the reason why none, as a TriggerReport")
+      .def("set_plan",
+           [](SharingCore& core, const py::object& poses) {
+             std::vector<std::pair<double, double>> plan;
+             py::array arr = py::array::ensure(poses);
+             if (!arr)
+             {
+               throw py::value_error("set_plan: expected an (N, 2) array of x, y");
+             }
+             if (arr.size() != 0)
+             {
+               auto xy = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(arr);
+               if (!xy || xy.ndim() != 2 || xy.shape(1) < 2)
+               {
+                 throw py::value_error("set_plan: expected an (N, 2) array of x, y; got " +
+                                       std::to_string(arr.ndim()) + " dims");
+               }
+               const std::size_t cols = static_cast<std::size_t>(xy.shape(1));
+               for (py::ssize_t i = 0; i < xy.shape(0); ++i)
+               {
+                 plan.emplace_back(xy.data()[i * cols], xy.data()[i * cols + 1]);
+               }
+             }
+             core.setPlan(plan);
+           },
+           py::arg("poses"), "The current global plan as (N, 2) world x, y (extra columns ignored); empty: none")
+      .def_property_readonly("plan_length", [](const SharingCore& core) { return core.plan().size(); })
+      .def("check_plan", &SharingCore::checkPlan, py::arg("robot_x"), py::arg("robot_y"), py::arg("now"),
+           "The plan-blocked trigger, after each process_scan; reason 'none' when nothing new is on the plan")
+      .def("remembered_cells", [](const SharingCore& core) { return toArray(core.rememberedCells()); })
       .def("apply_shared", &SharingCore::applyShared, py::arg("update"), py::arg("now"))
       .def("expire", &SharingCore::expire, py::arg("uuid"))
       .def("reset_obstacle_layer", &SharingCore::resetObstacleLayer)

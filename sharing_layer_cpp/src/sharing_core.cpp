@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <iterator>
 #include <limits>
 #include <stdexcept>
 
@@ -48,11 +50,87 @@ void LayerParams::validate() const
   {
     throw std::invalid_argument("robot_name must not be empty");
   }
+  const auto check_non_negative = [](double value, const char* name, const char* unit) {
+    if (!std::isfinite(value) || value < 0.0)
+    {
+      throw std::invalid_argument(std::string(name) + " must be finite and >= 0 " + unit + ", got " +
+                                  std::to_string(value));
+    }
+  };
+  check_non_negative(clearing_margin, "clearing_margin", "m");
+  check_non_negative(trigger_memory, "trigger_memory", "s");
+  check_non_negative(clearing_time, "clearing_time", "s");
+  check_non_negative(trigger_radius, "trigger_radius", "m");
+  check_non_negative(inscribed_radius, "inscribed_radius", "m");
+  if (clearing_neighbours > 1000)
+  {
+    throw std::invalid_argument("clearing_neighbours must be 0..1000 beams, got " +
+                                std::to_string(clearing_neighbours));
+  }
+  if (clearing_scans == 0 || clearing_scans > 1000)
+  {
+    throw std::invalid_argument("clearing_scans must be 1..1000 scans, got " + std::to_string(clearing_scans));
+  }
+}
+
+const char* triggerSourceName(TriggerSource source)
+{
+  switch (source)
+  {
+    case TriggerSource::StuckFeedback:
+      return "stuck_feedback";
+    case TriggerSource::RecoveryStatus:
+      return "recovery_status";
+    case TriggerSource::PlanBlocked:
+      return "plan_blocked";
+    case TriggerSource::Manual:
+      return "manual";
+  }
+  return "unknown";
+}
+
+TriggerSource parseTriggerSource(const std::string& name)
+{
+  for (TriggerSource source : { TriggerSource::StuckFeedback, TriggerSource::RecoveryStatus,
+                                TriggerSource::PlanBlocked, TriggerSource::Manual })
+  {
+    if (name == triggerSourceName(source))
+    {
+      return source;
+    }
+  }
+  throw std::invalid_argument("trigger source must be stuck_feedback, recovery_status, plan_blocked or manual, got \"" +
+                              name + "\"");
+}
+
+const char* triggerReasonName(TriggerReason reason)
+{
+  switch (reason)
+  {
+    case TriggerReason::None:
+      return "none";
+    case TriggerReason::Proposed:
+      return "proposed";
+    case TriggerReason::Debounced:
+      return "debounced";
+    case TriggerReason::NothingMarked:
+      return "nothing_marked";
+    case TriggerReason::OutOfRange:
+      return "out_of_range";
+    case TriggerReason::Static:
+      return "static";
+    case TriggerReason::AlreadyShared:
+      return "already_shared";
+    case TriggerReason::TooSmall:
+      return "too_small";
+  }
+  return "unknown";
 }
 
 SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params)
-  : params_(params), trigger_(params.trigger_debounce), dirty_(emptyBounds())
+  : params_(params), trigger_(params.trigger_debounce), plan_trigger_(params.trigger_debounce), dirty_(emptyBounds())
 {
+  last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();
   params_.validate();
   obstacles_ = CostGrid(GridGeometry(geometry.resolution, geometry.origin_x, geometry.origin_y, geometry.size_x,
                                      geometry.size_y),
@@ -63,8 +141,60 @@ SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params
 
 void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count)
 {
-  static_filter_ = StaticMapFilter(geometry(), costs, cost_count, params_.static_tolerance,
-                                   params_.static_occupied_cost);
+  // Validate (size) before keeping anything.
+  StaticMapFilter check(geometry(), costs, cost_count, params_.static_tolerance, params_.static_occupied_cost);
+  (void)check;
+  static_costs_.assign(costs, costs + cost_count);
+  rebuildStaticFilter();
+}
+
+void SharingCore::setUnknownMap(const std::uint8_t* unknown, std::size_t cell_count)
+{
+  if (unknown == nullptr || cell_count == 0)
+  {
+    unknown_.clear();
+  }
+  else
+  {
+    if (cell_count != geometry().cellCount())
+    {
+      throw std::invalid_argument("setUnknownMap: unknown mask has " + std::to_string(cell_count) +
+                                  " cells, the layer grid " + geometry().describe());
+    }
+    unknown_.assign(unknown, unknown + cell_count);
+  }
+  rebuildStaticFilter();
+}
+
+void SharingCore::rebuildStaticFilter()
+{
+  if (static_costs_.empty() && unknown_.empty())
+  {
+    static_filter_ = StaticMapFilter();
+    return;
+  }
+  static_filter_ = StaticMapFilter(geometry(), static_costs_.empty() ? nullptr : static_costs_.data(),
+                                   geometry().cellCount(), params_.static_tolerance, params_.static_occupied_cost,
+                                   unknown_.empty() ? nullptr : unknown_.data());
+  dropStaticCandidates();
+}
+
+void SharingCore::dropStaticCandidates()
+{
+  shareable_.erase(std::remove_if(shareable_.begin(), shareable_.end(),
+                                  [&](std::uint32_t index) {
+                                    const bool drop = static_filter_.isStatic(index);
+                                    if (drop)
+                                    {
+                                      is_shareable_[index] = 0;
+                                    }
+                                    return drop;
+                                  }),
+                   shareable_.end());
+  for (auto it = memory_.begin(); it != memory_.end();)
+  {
+    it = static_filter_.isStatic(it->first) ? memory_.erase(it) : std::next(it);
+  }
 }
 
 void SharingCore::countRectangle(const CellRect& rect, int delta)
@@ -86,11 +216,15 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   const double ox = observation.origin.x;
   const double oy = observation.origin.y;
   const double view_radius = std::max(params_.limits.obstacle_range, params_.limits.raytrace_range);
+  const bool origin_finite = std::isfinite(ox) && std::isfinite(oy);
 
-  // Only obstacles this scan can reach are monitored; the rest cost one distance test each.
+  // Only obstacles this scan can reach are monitored; the rest cost one distance test each. Their present
+  // cells and the remembered cells in reach are watched for evidence of free space.
   std::vector<SharedObstacle*> in_view;
   ScanWatch watch;
-  if (std::isfinite(ox) && std::isfinite(oy))
+  watch.free_margin = params_.clearing_margin;
+  watch.free_neighbours = params_.clearing_neighbours;
+  if (origin_finite)
   {
     for (auto& entry : shared_)
     {
@@ -100,6 +234,75 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         in_view.push_back(&obstacle);
         const std::vector<std::uint32_t>& present = obstacle.cells.present();
         watch.cells.insert(watch.cells.end(), present.begin(), present.end());
+        if (!present.empty())  // the bounding box of its present cells (sorted: first and last give the rows)
+        {
+          CellRect box{ std::numeric_limits<int>::max(), 0, std::numeric_limits<int>::min(), 0 };
+          unsigned int mx = 0, my = 0;
+          g.indexToCells(present.front(), mx, my);
+          box.min_y = static_cast<int>(my);
+          g.indexToCells(present.back(), mx, my);
+          box.max_y = static_cast<int>(my);
+          for (std::uint32_t index : present)
+          {
+            const int x = static_cast<int>(index % g.size_x);
+            box.min_x = std::min(box.min_x, x);
+            box.max_x = std::max(box.max_x, x);
+          }
+          watch.regions.push_back(box);
+        }
+      }
+    }
+  }
+  if (!memory_.empty())
+  {
+    const double reach_sq = (view_radius + g.resolution) * (view_radius + g.resolution);
+    for (auto it = memory_.begin(); it != memory_.end();)
+    {
+      const double age = now_s - it->second.time;
+      if (!(age <= params_.trigger_memory) || age < 0.0)  // forgotten, or time went backwards (a restart)
+      {
+        it = memory_.erase(it);
+        continue;
+      }
+      if (origin_finite)
+      {
+        unsigned int mx = 0, my = 0;
+        g.indexToCells(it->first, mx, my);
+        double wx = 0.0, wy = 0.0;
+        g.mapToWorld(mx, my, wx, wy);
+        if ((wx - ox) * (wx - ox) + (wy - oy) * (wy - oy) <= reach_sq)
+        {
+          watch.cells.push_back(it->first);
+          watch.regions.push_back(CellRect{ static_cast<int>(mx), static_cast<int>(my), static_cast<int>(mx),
+                                            static_cast<int>(my) });
+        }
+      }
+      ++it;
+    }
+  }
+
+  // Cells this scan will mark that are not lethal now: the "newly marked" cells of the plan trigger.
+  std::vector<std::uint32_t> not_lethal_before;
+  if (!plan_.empty())
+  {
+    const double sq_range = params_.limits.obstacle_range * params_.limits.obstacle_range;
+    const ScanLimits& l = params_.limits;
+    for (const Point3& p : observation.points)
+    {
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < l.min_obstacle_height ||
+          p.z > l.max_obstacle_height)
+      {
+        continue;
+      }
+      const double dz = p.z - observation.origin.z;
+      if ((p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz >= sq_range)
+      {
+        continue;
+      }
+      unsigned int mx = 0, my = 0;
+      if (g.worldToMap(p.x, p.y, mx, my) && obstacles_.getCost(mx, my) != LETHAL_OBSTACLE)
+      {
+        not_lethal_before.push_back(g.getIndex(mx, my));
       }
     }
   }
@@ -107,6 +310,46 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   ScanOutcome outcome;
   outcome.touch = applyScan(obstacles_, observation, params_.limits, watch);
   trackShareable(outcome.touch, observation);
+  // Signs of occupancy among the watched cells: marked, an endpoint in it beyond obstacle_range, or cleared
+  // by a beam that ended close behind it (the face it hit, or a neighbour it grazed).
+  std::vector<std::uint32_t> occupied;
+  {
+    const ScanTouch& t = outcome.touch;
+    std::set_difference(t.watched_cleared.begin(), t.watched_cleared.end(), t.watched_free.begin(),
+                        t.watched_free.end(), std::back_inserter(occupied));
+    occupied.insert(occupied.end(), t.watched_hit.begin(), t.watched_hit.end());
+    for (std::uint32_t index : t.marked)
+    {
+      if (monitored_[index] != 0 || memory_.count(index) != 0)
+      {
+        occupied.push_back(index);
+      }
+    }
+    std::sort(occupied.begin(), occupied.end());
+    occupied.erase(std::unique(occupied.begin(), occupied.end()), occupied.end());
+  }
+  remember(outcome.touch, occupied, observation, now_s);
+  last_scan_time_ = now_s;
+  if (origin_finite)
+  {
+    last_origin_x_ = ox;
+    last_origin_y_ = oy;
+  }
+  last_static_marked_ = 0;
+  for (std::uint32_t index : outcome.touch.marked)
+  {
+    last_static_marked_ += static_filter_.isStatic(index);
+  }
+  last_new_marked_.clear();
+  for (std::uint32_t index : not_lethal_before)
+  {
+    if (!static_filter_.isStatic(index))
+    {
+      last_new_marked_.push_back(index);
+    }
+  }
+  std::sort(last_new_marked_.begin(), last_new_marked_.end());
+  last_new_marked_.erase(std::unique(last_new_marked_.begin(), last_new_marked_.end()), last_new_marked_.end());
 
   if (in_view.empty())
   {
@@ -120,11 +363,12 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       marked_watched.push_back(index);
     }
   }
+  const std::vector<std::uint32_t>& seen_free = outcome.touch.watched_free;
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
     ObstacleUpdate update;
-    // Both lists are sorted: each row of the rectangle is one contiguous index range in them.
+    // The lists are sorted: each row of the rectangle is one contiguous index range in them.
     for (int y = r.min_y; y <= r.max_y; ++y)
     {
       const std::uint32_t row_first = g.getIndex(static_cast<unsigned int>(r.min_x), static_cast<unsigned int>(y));
@@ -137,12 +381,21 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
           update.marked.push_back(*it);
         }
       }
-      for (auto it = std::lower_bound(outcome.touch.watched_cleared.begin(), outcome.touch.watched_cleared.end(),
-                                      row_first);
-           it != outcome.touch.watched_cleared.end() && *it <= row_last; ++it)
+      for (auto it = std::lower_bound(occupied.begin(), occupied.end(), row_first);
+           it != occupied.end() && *it <= row_last; ++it)
       {
-        if (obstacle->cells.isPresent(*it))
+        obstacle->free_streaks.erase(*it);  // a sign of occupancy: the evidence of free space starts again
+      }
+      // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough (a
+      // beam grazing along a face through the free part of its cells, localisation jitter): an unbroken
+      // streak of clearing_scans scans over clearing_time clears the cell.
+      for (auto it = std::lower_bound(seen_free.begin(), seen_free.end(), row_first);
+           it != seen_free.end() && *it <= row_last; ++it)
+      {
+        if (obstacle->cells.isPresent(*it) &&
+            obstacle->free_streaks[*it].add(now_s, params_.clearing_scans, params_.clearing_time))
         {
+          obstacle->free_streaks.erase(*it);
           update.cleared.push_back(*it);
         }
       }
@@ -165,6 +418,42 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     outcome.updates.push_back(std::move(update));
   }
   return outcome;
+}
+
+void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied,
+                           const Observation& observation, double now_s)
+{
+  if (params_.trigger_memory <= 0.0 || !std::isfinite(now_s))
+  {
+    return;
+  }
+  // Remembered cells leave on the same evidence as shared ones, not on costmap clearing: a robot backing off
+  // clears a block's face with beams that end on it past obstacle_range.
+  for (std::uint32_t index : occupied)
+  {
+    auto found = memory_.find(index);
+    if (found != memory_.end())
+    {
+      found->second.free.reset();
+    }
+  }
+  for (std::uint32_t index : touch.watched_free)
+  {
+    auto found = memory_.find(index);
+    if (found != memory_.end() && found->second.free.add(now_s, params_.clearing_scans, params_.clearing_time))
+    {
+      memory_.erase(found);
+    }
+  }
+  const float sx = static_cast<float>(observation.origin.x);
+  const float sy = static_cast<float>(observation.origin.y);
+  for (std::uint32_t index : touch.marked)
+  {
+    if (!static_filter_.isStatic(index))
+    {
+      memory_[index] = RememberedCell{ now_s, sx, sy, FreeStreak() };
+    }
+  }
 }
 
 void SharingCore::trackShareable(const ScanTouch& touch, const Observation& observation)
@@ -200,9 +489,42 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
   shareable_.erase(keep_end, shareable_.end());
 }
 
-std::vector<Proposal> SharingCore::propose(double robot_x, double robot_y) const
+std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_y, bool use_memory) const
 {
-  const std::vector<std::uint32_t> cells = shareableCells();
+  std::vector<std::uint32_t> cells(shareable_);
+  if (use_memory && !memory_.empty() && std::isfinite(robot_x) && std::isfinite(robot_y))
+  {
+    const GridGeometry& g = geometry();
+    const double radius_sq = params_.trigger_radius * params_.trigger_radius;
+    const double range_sq = params_.limits.obstacle_range * params_.limits.obstacle_range;
+    const bool have_origin = std::isfinite(last_origin_x_) && std::isfinite(last_origin_y_);
+    for (const auto& entry : memory_)
+    {
+      const std::uint32_t index = entry.first;
+      if (is_shareable_[index] || insideMonitoredRectangle(index) || static_filter_.isStatic(index))
+      {
+        continue;
+      }
+      unsigned int mx = 0, my = 0;
+      g.indexToCells(index, mx, my);
+      double wx = 0.0, wy = 0.0;
+      g.mapToWorld(mx, my, wx, wy);
+      const double sensor_sq = have_origin ? (wx - last_origin_x_) * (wx - last_origin_x_) +
+                                                 (wy - last_origin_y_) * (wy - last_origin_y_)
+                                           : kInf;
+      if ((wx - robot_x) * (wx - robot_x) + (wy - robot_y) * (wy - robot_y) <= radius_sq && sensor_sq >= range_sq)
+      {
+        cells.push_back(index);
+      }
+    }
+  }
+  std::sort(cells.begin(), cells.end());
+  return cells;
+}
+
+std::vector<Proposal> SharingCore::group(const std::vector<std::uint32_t>& cells, double robot_x,
+                                         double robot_y) const
+{
   if (cells.empty())
   {
     return {};
@@ -213,6 +535,327 @@ std::vector<Proposal> SharingCore::propose(double robot_x, double robot_y) const
                              params_.rectangle_padding);
   }
   return proposeBySectors(geometry(), cells, robot_x, robot_y, params_.rectangle_padding);
+}
+
+std::vector<Proposal> SharingCore::propose(double robot_x, double robot_y, bool use_memory) const
+{
+  return group(candidates(robot_x, robot_y, use_memory), robot_x, robot_y);
+}
+
+namespace
+{
+/// printf-style formatting of up to two doubles (a format using one ignores the second)
+std::string format(const char* fmt, double a, double b)
+{
+  char buf[256];
+  std::snprintf(buf, sizeof(buf), fmt, a, b);
+  return buf;
+}
+
+std::string describeProposals(const std::vector<Proposal>& proposals)
+{
+  std::string out = "proposed " + std::to_string(proposals.size()) + " obstacle(s): ";
+  for (std::size_t i = 0; i < proposals.size(); ++i)
+  {
+    out += (i ? "; " : "") + std::to_string(proposals[i].cells.size()) + " cells in " +
+           proposals[i].rectangle.describe();
+  }
+  return out;
+}
+}  // namespace
+
+void SharingCore::explainNothing(TriggerReport& report, double robot_x, double robot_y, bool use_memory) const
+{
+  const GridGeometry& g = geometry();
+  std::size_t near = 0, near_shared = 0, far = 0;
+  double nearest = kInf;
+  for (const auto& entry : memory_)
+  {
+    if (static_filter_.isStatic(entry.first))
+    {
+      continue;
+    }
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(entry.first, mx, my);
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(mx, my, wx, wy);
+    const double d = std::hypot(wx - robot_x, wy - robot_y);
+    if (d <= params_.trigger_radius)
+    {
+      ++near;
+      near_shared += insideMonitoredRectangle(entry.first);
+    }
+    else
+    {
+      ++far;
+      nearest = std::min(nearest, d);
+    }
+  }
+  if (!use_memory && candidates(robot_x, robot_y, true).size() > shareable_.size())
+  {
+    report.reason = TriggerReason::OutOfRange;
+    report.message += format("nothing proposed: the recently marked cells near the robot lie beyond obstacle_range "
+                             "%.2f m of the current view, and ",
+                             params_.limits.obstacle_range, 0.0);
+    report.message += std::string(triggerSourceName(report.source)) +
+                      " does not use the trigger memory (memory_on_stuck_feedback)";
+  }
+  else if (!candidates(robot_x, robot_y, use_memory).empty())
+  {
+    report.reason = TriggerReason::TooSmall;
+    report.message += "nothing proposed: the candidate cells form groups smaller than min_cluster_cells " +
+                      std::to_string(params_.min_cluster_cells);
+  }
+  else if (near_shared > 0)
+  {
+    report.reason = TriggerReason::AlreadyShared;
+    report.message += "nothing proposed: " + std::to_string(near_shared) + " of the " + std::to_string(near) +
+                      " recently marked cell(s) near the robot lie in obstacles already shared, the rest were "
+                      "seen free since";
+  }
+  else if (far > 0 && near == 0)
+  {
+    report.reason = TriggerReason::OutOfRange;
+    report.message += "nothing proposed: " + std::to_string(far) + " recently marked cell(s), " +
+                      format("the nearest %.2f m away, beyond trigger_radius %.2f m", nearest,
+                             params_.trigger_radius);
+  }
+  else if (near > 0)
+  {
+    report.reason = TriggerReason::NothingMarked;
+    report.message += "nothing proposed: the " + std::to_string(near) +
+                      " recently marked cell(s) near the robot were seen free since";
+  }
+  else if (last_static_marked_ > 0)
+  {
+    report.reason = TriggerReason::Static;
+    report.message += "nothing proposed: the " + std::to_string(last_static_marked_) +
+                      " cell(s) the last scan marked are all static (within static_tolerance " +
+                      std::to_string(params_.static_tolerance) + " cells of a wall or unknown map area)";
+  }
+  else
+  {
+    report.reason = TriggerReason::NothingMarked;
+    report.message += format("nothing proposed: no new cell marked within obstacle_range %.2f m in the last "
+                             "trigger_memory %.1f s",
+                             params_.limits.obstacle_range, params_.trigger_memory);
+  }
+}
+
+TriggerReport SharingCore::trigger(TriggerSource source, double now_s, double robot_x, double robot_y)
+{
+  TriggerReport report;
+  report.source = source;
+  report.log = true;
+  report.message = std::string(triggerSourceName(source)) + " trigger at " + format("(%.2f, %.2f): ", robot_x, robot_y);
+  if (!std::isfinite(now_s) || !std::isfinite(robot_x) || !std::isfinite(robot_y))
+  {
+    report.message += "ignored: time or robot pose not finite";
+    return report;
+  }
+  if (!trigger_.signal(now_s))
+  {
+    report.reason = TriggerReason::Debounced;
+    report.log = trigger_.burstSignals() == 2;  // once per burst
+    report.message += format("debounced: less than trigger_debounce %.1f s after the previous signal (further "
+                             "signals of this burst are not logged)",
+                             params_.trigger_debounce, 0.0);
+    return report;
+  }
+  const bool use_memory = source == TriggerSource::RecoveryStatus || source == TriggerSource::Manual ||
+                          (source == TriggerSource::StuckFeedback && params_.memory_on_stuck_feedback);
+  report.proposals = propose(robot_x, robot_y, use_memory);
+  if (!report.proposals.empty())
+  {
+    report.reason = TriggerReason::Proposed;
+    report.message += describeProposals(report.proposals);
+    return report;
+  }
+  explainNothing(report, robot_x, robot_y, use_memory);
+  return report;
+}
+
+void SharingCore::setPlan(const std::vector<std::pair<double, double>>& poses)
+{
+  plan_.clear();
+  plan_.reserve(poses.size());
+  for (const auto& pose : poses)
+  {
+    if (std::isfinite(pose.first) && std::isfinite(pose.second))
+    {
+      plan_.push_back(pose);
+    }
+  }
+  if (plan_.empty())
+  {
+    last_new_marked_.clear();
+  }
+}
+
+std::vector<std::size_t> SharingCore::planAhead(double robot_x, double robot_y, double reach) const
+{
+  std::size_t nearest = 0;
+  double best = kInf;
+  for (std::size_t i = 0; i < plan_.size(); ++i)
+  {
+    const double d = (plan_[i].first - robot_x) * (plan_[i].first - robot_x) +
+                     (plan_[i].second - robot_y) * (plan_[i].second - robot_y);
+    if (d < best)
+    {
+      best = d;
+      nearest = i;
+    }
+  }
+  std::vector<std::size_t> ahead;
+  const double reach_sq = reach * reach;
+  for (std::size_t i = nearest; i < plan_.size(); ++i)
+  {
+    const double d = (plan_[i].first - robot_x) * (plan_[i].first - robot_x) +
+                     (plan_[i].second - robot_y) * (plan_[i].second - robot_y);
+    // A segment is kept when either end is in reach, so a sparse plan keeps its segments near the robot.
+    const bool next_in_reach =
+        i + 1 < plan_.size() && (plan_[i + 1].first - robot_x) * (plan_[i + 1].first - robot_x) +
+                                        (plan_[i + 1].second - robot_y) * (plan_[i + 1].second - robot_y) <=
+                                    reach_sq;
+    if (d <= reach_sq || next_in_reach)
+    {
+      ahead.push_back(i);
+    }
+  }
+  return ahead;
+}
+
+bool SharingCore::nearPlan(std::uint32_t index, const std::vector<std::size_t>& ahead) const
+{
+  const GridGeometry& g = geometry();
+  unsigned int mx = 0, my = 0;
+  g.indexToCells(index, mx, my);
+  double px = 0.0, py = 0.0;
+  g.mapToWorld(mx, my, px, py);
+  const double r_sq = params_.inscribed_radius * params_.inscribed_radius;
+  for (std::size_t i : ahead)
+  {
+    const double ax = plan_[i].first, ay = plan_[i].second;
+    double bx = ax, by = ay;
+    if (i + 1 < plan_.size())
+    {
+      bx = plan_[i + 1].first;
+      by = plan_[i + 1].second;
+    }
+    // Distance from the cell centre to the segment between this pose and the next.
+    const double vx = bx - ax, vy = by - ay;
+    const double len_sq = vx * vx + vy * vy;
+    double t = len_sq > 0.0 ? ((px - ax) * vx + (py - ay) * vy) / len_sq : 0.0;
+    t = std::min(1.0, std::max(0.0, t));
+    const double dx = ax + t * vx - px, dy = ay + t * vy - py;
+    if (dx * dx + dy * dy <= r_sq)
+    {
+      return true;
+    }
+  }
+  return false;
+}
+
+TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_s)
+{
+  TriggerReport report;
+  report.source = TriggerSource::PlanBlocked;
+  if (plan_.empty() || last_new_marked_.empty() || !std::isfinite(robot_x) || !std::isfinite(robot_y) ||
+      !std::isfinite(now_s))
+  {
+    return report;
+  }
+  const std::vector<std::size_t> ahead =
+      planAhead(robot_x, robot_y, params_.limits.obstacle_range + params_.inscribed_radius);
+  if (ahead.empty())
+  {
+    return report;
+  }
+  const GridGeometry& g = geometry();
+  // obstacle_range counts from the laser that marked the cells: a laser ahead of the robot's centre
+  // marks a cell first at obstacle_range from itself, and once marked the cell is no longer new.
+  const bool laser_known = std::isfinite(last_origin_x_) && std::isfinite(last_origin_y_);
+  const double from_x = laser_known ? last_origin_x_ : robot_x;
+  const double from_y = laser_known ? last_origin_y_ : robot_y;
+  const double reach = params_.limits.obstacle_range + 0.5 * g.resolution * std::sqrt(2.0);
+  const double range_sq = reach * reach;
+  std::size_t blocking = 0, blocking_shared = 0;
+  for (std::uint32_t index : last_new_marked_)
+  {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(mx, my, wx, wy);
+    if ((wx - from_x) * (wx - from_x) + (wy - from_y) * (wy - from_y) > range_sq || !nearPlan(index, ahead))
+    {
+      continue;
+    }
+    ++blocking;
+    blocking_shared += insideMonitoredRectangle(index);
+  }
+  if (blocking == 0)
+  {
+    return report;
+  }
+  report.log = true;
+  report.message = "plan_blocked trigger at " + format("(%.2f, %.2f): ", robot_x, robot_y) +
+                   std::to_string(blocking) + " newly marked cell(s) on the plan ahead; ";
+  if (!plan_trigger_.signal(now_s))
+  {
+    report.reason = TriggerReason::Debounced;
+    report.log = plan_trigger_.burstSignals() == 2;
+    report.message += format("debounced: less than trigger_debounce %.1f s after the previous one (further ones of "
+                             "this burst are not logged)",
+                             params_.trigger_debounce, 0.0);
+    return report;
+  }
+  if (blocking_shared == blocking)
+  {
+    report.reason = TriggerReason::AlreadyShared;
+    report.message += "nothing proposed: they lie in obstacles already shared";
+    return report;
+  }
+  // The clusters of candidate cells that touch the plan ahead.
+  const std::vector<std::uint32_t> cells = candidates(robot_x, robot_y, true);
+  for (Proposal& proposal : proposeByClusters(g, cells, params_.cluster_gap, params_.min_cluster_cells,
+                                              params_.rectangle_padding))
+  {
+    if (std::any_of(proposal.cells.begin(), proposal.cells.end(),
+                    [&](std::uint32_t index) { return nearPlan(index, ahead); }))
+    {
+      report.proposals.push_back(std::move(proposal));
+    }
+  }
+  if (!report.proposals.empty())
+  {
+    report.reason = TriggerReason::Proposed;
+    report.message += describeProposals(report.proposals);
+    return report;
+  }
+  report.reason = TriggerReason::TooSmall;
+  report.message += "nothing proposed: the cells on the plan form groups smaller than min_cluster_cells " +
+                    std::to_string(params_.min_cluster_cells);
+  return report;
+}
+
+void SharingCore::setInscribedRadius(double radius_m)
+{
+  LayerParams changed = params_;
+  changed.inscribed_radius = radius_m;
+  changed.validate();
+  params_ = changed;
+}
+
+std::vector<std::uint32_t> SharingCore::rememberedCells() const
+{
+  std::vector<std::uint32_t> cells;
+  cells.reserve(memory_.size());
+  for (const auto& entry : memory_)
+  {
+    cells.push_back(entry.first);
+  }
+  std::sort(cells.begin(), cells.end());
+  return cells;
 }
 
 ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
@@ -306,6 +949,10 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   SharedObstacle& obstacle = found->second;
   obstacle.max_version = std::max(obstacle.max_version, update.version);
   result.changed = obstacle.cells.apply(update.marked, update.cleared, update.version, update.source);
+  for (std::uint32_t index : update.marked)
+  {
+    obstacle.free_streaks.erase(index);  // a robot saw it occupied: evidence of free space starts again
+  }
   markDirty(update.marked);
   markDirty(update.cleared);
   result.ok = true;
@@ -333,6 +980,12 @@ void SharingCore::resetObstacleLayer()
     is_shareable_[index] = 0;
   }
   shareable_.clear();
+  // What the robot saw before the reset is forgotten with it (the trigger memory and the plan trigger's
+  // newly marked cells); shared obstacles and their monitoring state stay.
+  memory_.clear();
+  last_new_marked_.clear();
+  last_static_marked_ = 0;
+  last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();
 }
 
 std::size_t SharingCore::clearObstaclesOutside(int x0, int y0, int x1, int y1)

@@ -7,7 +7,7 @@
 namespace sharing_layer
 {
 StaticMapFilter::StaticMapFilter(const GridGeometry& geometry, const std::uint8_t* costs, std::size_t cost_count,
-                                 int tolerance, std::uint8_t occupied_threshold)
+                                 int tolerance, std::uint8_t occupied_threshold, const std::uint8_t* unknown)
   : tolerance_(tolerance)
 {
   if (cost_count != geometry.cellCount())
@@ -21,26 +21,31 @@ StaticMapFilter::StaticMapFilter(const GridGeometry& geometry, const std::uint8_
   }
   const int sx = static_cast<int>(geometry.size_x);
   const int sy = static_cast<int>(geometry.size_y);
+  std::vector<std::uint8_t> blocked(geometry.cellCount(), 0);  // occupied or unknown
+  for (std::size_t i = 0; i < blocked.size(); ++i)
+  {
+    blocked[i] = (costs != nullptr && costs[i] >= occupied_threshold) || (unknown != nullptr && unknown[i] != 0);
+  }
   // Separable square dilation: first along rows, then along columns, each with a sliding count.
   std::vector<std::uint8_t> rows(geometry.cellCount(), 0);
   for (int y = 0; y < sy; ++y)
   {
-    const std::uint8_t* in = costs + static_cast<std::size_t>(y) * sx;
+    const std::uint8_t* in = blocked.data() + static_cast<std::size_t>(y) * sx;
     std::uint8_t* out = rows.data() + static_cast<std::size_t>(y) * sx;
     int count = 0;
     for (int x = 0; x < std::min(tolerance, sx); ++x)
     {
-      count += in[x] >= occupied_threshold;
+      count += in[x];
     }
     for (int x = 0; x < sx; ++x)
     {
       if (x + tolerance < sx)
       {
-        count += in[x + tolerance] >= occupied_threshold;
+        count += in[x + tolerance];
       }
       if (x - tolerance - 1 >= 0)
       {
-        count -= in[x - tolerance - 1] >= occupied_threshold;
+        count -= in[x - tolerance - 1];
       }
       out[x] = count > 0;
     }

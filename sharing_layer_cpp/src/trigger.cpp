@@ -23,6 +23,7 @@ bool TriggerDebounce::signal(double now_s)
   }
   const bool fires = now_s < last_signal_ || now_s - last_signal_ > window_;
   last_signal_ = now_s;
+  burst_signals_ = fires ? 1 : burst_signals_ + 1;
   return fires;
 }
 

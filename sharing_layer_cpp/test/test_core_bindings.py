@@ -75,8 +75,12 @@ def test_apply_shared_monitoring_and_draw():
     master = np.zeros((40, 40), np.uint8)
     c.draw_shared(master)
     assert np.count_nonzero(master) == 2
-    # A beam through both cells to a farther wall clears them: an update with our name and version 2.
-    out = c.process_scan((0.55, 1.55, 0.0), np.array([[2.55, 1.55, 0.0]]), 2.0)
+    # A beam through both cells to a farther wall is evidence of free space; three such scans over a second
+    # (clearing_scans, clearing_time) clear them: an update with our name and version 2.
+    beam = np.array([[2.55, 1.55, 0.0]])
+    assert not c.process_scan((0.55, 1.55, 0.0), beam, 2.0).updates
+    assert not c.process_scan((0.55, 1.55, 0.0), beam, 2.5).updates
+    out = c.process_scan((0.55, 1.55, 0.0), beam, 3.0)
     assert len(out.updates) == 1
     upd = out.updates[0]
     assert (upd.uuid, upd.source, upd.version) == ("a", "robot_0", 2)
@@ -126,3 +130,62 @@ def test_trigger_and_proposals_from_python():
     proposals = c.propose(2.05, 2.05)
     assert [p.cells.size for p in proposals] == [2, 1]
     assert proposals[0].rectangle == pytest.approx([2.5, 1.9, 2.6, 2.1])
+
+
+def test_evidence_parameters_and_scan_evidence_lists():
+    p = core.LayerParams(clearing_margin=0.2, clearing_scans=2, clearing_time=0.0, clearing_neighbours=0,
+                         trigger_memory=10.0, trigger_radius=3.0, inscribed_radius=0.3)
+    assert (p.clearing_margin, p.clearing_scans, p.clearing_time, p.clearing_neighbours) == (0.2, 2, 0.0, 0)
+    assert (p.trigger_memory, p.trigger_radius, p.inscribed_radius) == (10.0, 3.0, 0.3)
+    for name, value in (("clearing_margin", -0.1), ("clearing_scans", 0), ("clearing_time", float("inf")),
+                        ("trigger_memory", float("nan")), ("trigger_radius", -1.0), ("inscribed_radius", -1.0),
+                        ("clearing_neighbours", 5000)):
+        with pytest.raises(ValueError, match=name):
+            core.LayerParams(**{name: value})
+    c = core.SharingCore(grid(), p)
+    assert c.apply_shared(update(marked=[15 * 40 + 15, 15 * 40 + 22]), 0.0).ok
+    # Endpoint in cell 22 at 1.7 m: cell 15 lies 0.7 m before it (evidence), cell 22 holds the endpoint (hit).
+    out = c.process_scan((0.55, 1.55, 0.0), np.array([[2.25, 1.55, 0.0]]), 1.0)
+    assert out.watched_free.tolist() == [15 * 40 + 15]
+    assert out.watched_hit.tolist() == [15 * 40 + 22]
+    out = c.process_scan((0.55, 1.55, 0.0), np.array([[2.25, 1.55, 0.0]]), 1.1)
+    assert [u.cleared.tolist() for u in out.updates] == [[15 * 40 + 15]]
+
+
+def test_unknown_map_memory_and_triggers_from_python():
+    c = make_core()
+    unknown = np.zeros((40, 40), np.uint8)
+    unknown[:, 30:] = 1  # x >= 3.0 m is unknown
+    c.set_unknown_map(unknown)
+    with pytest.raises(ValueError, match="cells"):
+        c.set_unknown_map(np.zeros(7, np.uint8))
+    # (2.55, 2.05) is known free; (3.15, 2.05) is unknown: never shareable, never remembered.
+    c.process_scan((2.05, 2.05, 0.0), np.array([[2.55, 2.05, 0.0], [3.15, 2.05, 0.0]]), 1.0)
+    assert c.shareable_cells().tolist() == [20 * 40 + 25]
+    assert c.remembered_cells().tolist() == [20 * 40 + 25]
+    report = c.trigger("recovery_status", 1.0, 2.05, 2.05)
+    assert (report.source, report.reason, report.log) == ("recovery_status", "proposed", True)
+    assert [p.cells.tolist() for p in report.proposals] == [[20 * 40 + 25]]
+    again = c.trigger("stuck_feedback", 1.1, 2.05, 2.05)
+    assert again.reason == "debounced" and "stuck_feedback" in again.message
+    with pytest.raises(ValueError, match="trigger source"):
+        c.trigger("bogus", 5.0, 0.0, 0.0)
+    c.set_unknown_map(None)
+    c.process_scan((2.05, 2.05, 0.0), np.array([[3.15, 2.05, 0.0]]), 2.0)
+    assert 20 * 40 + 31 in c.remembered_cells().tolist()
+
+
+def test_plan_trigger_from_python():
+    c = make_core()
+    xs = np.arange(0.05, 3.95, 0.05)
+    c.set_plan(np.stack([xs, np.full_like(xs, 2.05)], axis=1))
+    assert c.plan_length == xs.size
+    assert c.check_plan(1.05, 2.05, 1.0).reason == "none"  # no scan yet
+    c.process_scan((1.05, 2.05, 0.0), np.array([[2.55, 2.05, 0.0], [2.55, 3.55, 0.0]]), 1.0)
+    report = c.check_plan(1.05, 2.05, 1.0)
+    assert (report.source, report.reason) == ("plan_blocked", "proposed")
+    assert [p.cells.tolist() for p in report.proposals] == [[20 * 40 + 25]]  # not the cell 1.5 m off the plan
+    with pytest.raises(ValueError, match="x, y"):
+        c.set_plan(np.zeros(4))
+    c.set_plan(np.zeros((0, 2)))
+    assert c.plan_length == 0

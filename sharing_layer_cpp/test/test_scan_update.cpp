@@ -180,13 +180,22 @@ TEST(ScanUpdate, WatchingLeavesTheGridAsAnUnwatchedScanDoes)
   watch.cells.insert(watch.cells.end(), { 2 * 12 + 5, 2 * 12 + 5, 1 * 12 + 9 });  // duplicates
   const Observation scan = scanFrom(0.05, 0.25, { { 0.55, 0.25, 0.0 }, { 1.15, 0.05, 0.0 }, { 0.75, 0.45, 0.0 } });
 
+  // The evidence options (margin, shadow filter, regions) must not change what the grid ends with either.
+  CostGrid evidence_grid = watched_grid;
+  ScanWatch evidence_watch = watch;
+  evidence_watch.free_margin = 0.1;
+  evidence_watch.free_neighbours = 1;
+  evidence_watch.regions = { CellRect{ 0, 0, 11, 4 } };
+  const ScanTouch evidence = applyScan(evidence_grid, scan, limits(2.5, 3.0), evidence_watch);
   const ScanTouch watched = applyScan(watched_grid, scan, limits(2.5, 3.0), watch);
   applyScan(plain_grid, scan, limits(2.5, 3.0));
 
   for (std::uint32_t i = 0; i < plain_grid.geometry().cellCount(); ++i)
   {
     ASSERT_EQ(plain_grid.at(i), watched_grid.at(i)) << "cell " << i;
+    ASSERT_EQ(plain_grid.at(i), evidence_grid.at(i)) << "cell " << i;
   }
+  EXPECT_EQ(watched.watched_cleared, evidence.watched_cleared);
   // Every cell the scan turned free must be reported; a reported cell must end free.
   std::vector<std::uint32_t> expected;
   for (std::uint32_t i = 0; i < plain_grid.geometry().cellCount(); ++i)

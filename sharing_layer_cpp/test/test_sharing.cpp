@@ -170,44 +170,56 @@ TEST(Shareable, NewCellsAwayFromWallsAreTrackedOnceAndDroppedWhenClearedOrOutOfR
 
 TEST(Monitoring, Figure45MovedObstacleSeenFromANewAngle)
 {
-  // Thesis Figure 4.5: an obstacle was shared as its west face (column 18) plus one cell another robot saw
-  // on its east side (23, 20). It has since moved two cells east. A robot west of it now sees the new west
-  // face (column 20): the new face is marked, the old face on the beams is cleared, and the east cell,
-  // hidden behind the obstacle, is left alone.
-  SharingCore core(grid40(), params());
+  // Thesis Figure 4.5: an obstacle was shared as its west face (column 18, rows 18-22) plus one cell another
+  // robot saw on its east side (28, 20). It has since moved five cells (0.5 m) east. A robot west of it now
+  // sees the new west face (column 23, rows 17-22): the new face is marked at once; the old face, which the beams pass 0.5 m
+  // before their endpoints (more than clearing_margin), is cleared after clearing_scans such scans; the
+  // east cell, hidden behind the obstacle, is left alone.
+  LayerParams p = params();
+  ASSERT_EQ(3u, p.clearing_scans);
+  ASSERT_EQ(1.0, p.clearing_time);
+  SharingCore core(grid40(), p);
   std::vector<std::uint32_t> old_face;
-  for (unsigned int y = 17; y <= 22; ++y)
+  for (unsigned int y = 18; y <= 22; ++y)
   {
     old_face.push_back(cell(18, y));
   }
   std::vector<std::uint32_t> shared = old_face;
-  shared.push_back(cell(23, 20));
-  ASSERT_TRUE(core.applyShared(share("fig45", shared, Subsection(1.5, 1.5, 2.5, 2.5)), 0.0).ok);
+  shared.push_back(cell(28, 20));
+  ASSERT_TRUE(core.applyShared(share("fig45", shared, Subsection(1.5, 1.5, 2.9, 2.5)), 0.0).ok);
 
   std::vector<Point3> beams;
   for (unsigned int y = 17; y <= 22; ++y)
   {
-    beams.push_back(Point3{ 2.0 + 0.01, y * 0.1 + 0.05, 0.0 });
+    beams.push_back(Point3{ 2.3 + 0.01, y * 0.1 + 0.05, 0.0 });
   }
-  const ScanOutcome outcome = core.processScan(scan(Point3{ 0.2, 1.95 + 0.05, 0.0 }, beams), 5.0);
-  ASSERT_EQ(1u, outcome.updates.size());
-  const ObstacleUpdate& update = outcome.updates[0];
-  EXPECT_EQ("fig45", update.uuid);
-  EXPECT_EQ("robot_0", update.source);
-  EXPECT_EQ(2u, update.version);
+  const Point3 origin{ 0.2, 1.95 + 0.05, 0.0 };
   std::vector<std::uint32_t> new_face;
   for (unsigned int y = 17; y <= 22; ++y)
   {
-    new_face.push_back(cell(20, y));
+    new_face.push_back(cell(23, y));
   }
-  EXPECT_EQ(new_face, update.marked);
+  ScanOutcome outcome = core.processScan(scan(origin, beams), 5.0);
+  ASSERT_EQ(1u, outcome.updates.size());
+  EXPECT_EQ("fig45", outcome.updates[0].uuid);
+  EXPECT_EQ("robot_0", outcome.updates[0].source);
+  EXPECT_EQ(2u, outcome.updates[0].version);
+  EXPECT_EQ(new_face, outcome.updates[0].marked);
+  EXPECT_TRUE(outcome.updates[0].cleared.empty());
+  // The second scan is evidence too, but not enough yet: no update.
+  EXPECT_TRUE(core.processScan(scan(origin, beams), 5.5).updates.empty());
+  outcome = core.processScan(scan(origin, beams), 6.0);
+  ASSERT_EQ(1u, outcome.updates.size());
+  const ObstacleUpdate& update = outcome.updates[0];
+  EXPECT_EQ(3u, update.version);
+  EXPECT_TRUE(update.marked.empty());
   EXPECT_EQ(old_face, update.cleared);
   std::vector<std::uint32_t> expected = new_face;
-  expected.push_back(cell(23, 20));
+  expected.push_back(cell(28, 20));
   std::sort(expected.begin(), expected.end());
   EXPECT_EQ(expected, core.sharedCells("fig45"));
   // The same scan again changes nothing: no update.
-  EXPECT_TRUE(core.processScan(scan(Point3{ 0.2, 2.0, 0.0 }, beams), 5.1).updates.empty());
+  EXPECT_TRUE(core.processScan(scan(origin, beams), 6.5).updates.empty());
 }
 
 TEST(Monitoring, ObstaclesOutOfRangeAreNotTouched)

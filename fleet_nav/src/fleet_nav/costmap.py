@@ -44,6 +44,7 @@ class GlobalCostmap:
         self.static = static_costs(occupancy, params.lethal_cost_threshold, params.track_unknown_space)
         self.layer = core.SharingCore(geometry, layer_params)
         self.layer.set_static_map(self.static)
+        self.layer.set_unknown_map(occupancy == -1)  # unknown map cells are never shared
         self.inflator = nav.Inflator(geometry.resolution, params.inscribed_radius, params.inflation_radius,
                                      params.cost_scaling_factor)
         self.master = self.static.copy()

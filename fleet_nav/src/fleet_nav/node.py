@@ -95,7 +95,9 @@ class NavNode:
         self.layer_params = core.LayerParams(
             obstacle_range=p.obstacle_range, raytrace_range=p.raytrace_range,
             min_obstacle_height=p.min_obstacle_height, max_obstacle_height=p.max_obstacle_height,
-            robot_name=self.robot, **p.sharing)
+            # the plan-blocked trigger looks within the robot's inscribed radius of the plan, as the
+            # costmap_2d plugin does with its layered costmap's
+            inscribed_radius=p.inscribed_radius, robot_name=self.robot, **p.sharing)
         rospy.loginfo("fleet_nav (%s): frames %s -> %s, obstacle_range %.2f, raytrace_range %.2f, inscribed %.3f m, "
                       "inflation %.2f m x %.1f, update %.1f Hz, planner %.2f Hz, controller %.1f Hz, sharing %s",
                       self.robot, p.global_frame, p.robot_base_frame, p.obstacle_range, p.raytrace_range,
@@ -151,9 +153,9 @@ class NavNode:
         rospy.Subscriber("base_scan", _LaserScan, self._on_scan, queue_size=2)
         rospy.Subscriber("shared_obstacles", SharedObstacle, self._on_shared, queue_size=100)
         rospy.Subscriber("expired_obstacles", String, self._on_expired, queue_size=100)
-        rospy.Subscriber("stuck_feedback", Empty, self._on_external_stuck, queue_size=10)
+        rospy.Subscriber("stuck_feedback", Empty, self._on_stuck_feedback, queue_size=10)
         # Like the costmap_2d plugin: a recovery announced by this host or by a move_base beside it.
-        rospy.Subscriber("move_base/recovery_status", rospy.AnyMsg, self._on_external_stuck, queue_size=10)
+        rospy.Subscriber("move_base/recovery_status", rospy.AnyMsg, self._on_recovery_status, queue_size=10)
         rospy.Subscriber("move_base_simple/goal", PoseStamped, self._on_simple_goal, queue_size=1)
         self.server = actionlib.SimpleActionServer("move_base", MoveBaseAction, auto_start=False)
         self.server.register_goal_callback(self._on_action_goal)
@@ -206,13 +208,25 @@ class NavNode:
                                        % (self.robot, sx, sy))
             for update in outcome.updates:
                 self.update_pub.publish(_to_message(update, self.params.global_frame))
-            if self.stuck_pending is not None and self.params.sharing_enabled:
-                stamp, self.stuck_pending = self.stuck_pending, None
-                if self.costmap.layer.signal_stuck(stamp) and self.pose is not None:
-                    self._propose(now)
+            if not self.params.sharing_enabled:
+                return
+            x, y = (self.pose[0], self.pose[1]) if self.pose is not None else (sx, sy)
+            if self.stuck_pending is not None:
+                (source, stamp), self.stuck_pending = self.stuck_pending, None
+                self._report(self.costmap.layer.trigger(source, stamp, x, y), now)
+            # The plan-blocked trigger: newly marked cells on the plan ahead, before the replan hides them.
+            if self.params.plan_trigger:
+                self._report(self.costmap.layer.check_plan(x, y, now), now)
 
-    def _propose(self, now):
-        proposals = self.costmap.layer.propose(self.pose[0], self.pose[1])
+    def _report(self, report, now):
+        """Publishes a trigger's proposals and logs it once (what it proposed, or why nothing)."""
+        if report.reason == "none":
+            return
+        if report.log:
+            rospy.loginfo("fleet_nav (%s): %s", self.robot, report.message)
+        self._publish_proposals(report.proposals, now)
+
+    def _publish_proposals(self, proposals, now):
         for proposal in proposals:
             msg = SharedObstacle()
             msg.header.stamp = rospy.Time.from_sec(now)
@@ -225,13 +239,18 @@ class NavNode:
                 g.resolution, g.origin_x, g.origin_y, g.size_x, g.size_y)
             msg.version = 0
             self.proposal_pub.publish(msg)
-        rospy.loginfo("fleet_nav (%s): stuck at (%.2f, %.2f): %d proposal(s) with %s cells", self.robot,
-                      self.pose[0], self.pose[1], len(proposals), [len(p.cells) for p in proposals])
 
-    def _on_external_stuck(self, _msg):
+    def _on_stuck_feedback(self, _msg):
+        self._trigger_pending("stuck_feedback")
+
+    def _on_recovery_status(self, _msg):
+        self._trigger_pending("recovery_status")
+
+    def _trigger_pending(self, source):
+        """A stuck trigger, run with the next scan (the layer proposes from what it has just seen)."""
         with self.lock:
             if self.stuck_pending is None:
-                self.stuck_pending = rospy.get_time()
+                self.stuck_pending = (source, rospy.get_time())
 
     def _on_shared(self, msg):
         if not self.params.sharing_enabled:
@@ -300,6 +319,7 @@ class NavNode:
     def _on_preempt(self):
         with self.lock:
             self.navigator.cancel()
+            self.costmap.layer.set_plan(np.zeros((0, 2)))
         self.cmd_pub.publish(Twist())
         self.server.set_preempted(MoveBaseResult(), text="cancelled")
 
@@ -431,25 +451,28 @@ class NavNode:
     def _handle(self, step):
         for event in step.events:
             if event is Event.PLANNED:
+                with self.lock:
+                    if self.params.plan_trigger:
+                        self.costmap.layer.set_plan(self.navigator.path_xy)
                 self._publish_plan()
             elif event is Event.STUCK:
                 rospy.logwarn("fleet_nav (%s): local controller failed (%d for this goal): %s; publishing "
                               "stuck_feedback (stuck_feedback_on_local_failure)", self.robot,
                               self.navigator.local_failures, step.reason)
-                self.stuck_pub.publish(Empty())
-                with self.lock:
-                    if self.stuck_pending is None:
-                        self.stuck_pending = rospy.get_time()
+                self.stuck_pub.publish(Empty())   # the subscription above hands it to the layer
             elif event is Event.RECOVERY:
                 self._publish_recovery_status(*step.recovery)
             elif event is Event.SUCCEEDED:
                 with self.lock:
+                    self.costmap.layer.set_plan(np.zeros((0, 2)))
                     self.costmap.reset_obstacle_layer()
                 rospy.loginfo("fleet_nav (%s): goal reached; obstacle layer reset (%d shared obstacles kept)",
                               self.robot, len(self.costmap.layer.shared_uuids()))
                 if self.server.is_active():
                     self.server.set_succeeded(MoveBaseResult(), text="goal reached")
             elif event is Event.ABORTED:
+                with self.lock:
+                    self.costmap.layer.set_plan(np.zeros((0, 2)))
                 rospy.logerr("fleet_nav (%s): goal aborted: %s", self.robot, step.reason)
                 if self.server.is_active():
                     self.server.set_aborted(MoveBaseResult(), text=step.reason)

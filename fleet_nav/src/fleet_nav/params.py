@@ -9,7 +9,8 @@ Lookup order for a costmap key K: ``global_costmap/K``, ``global_costmap/inflati
 (inflation keys only), then ``K``. Local-planner keys come from ``TrajectoryPlannerROS/``, then
 ``DWAPlannerROS/``, then the top level. Layer parameters of the sharing layer come from
 ``sharing/`` or ``sharing_layer/`` (static_tolerance, proposal_strategy, trigger_debounce,
-cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost).
+cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost, clearing_margin,
+clearing_scans, clearing_time, clearing_neighbours, trigger_memory, trigger_radius, memory_on_stuck_feedback).
 """
 import ast
 import math
@@ -19,7 +20,9 @@ from typing import Dict, List, Tuple
 from fleet_nav.errors import ParameterError
 
 SHARING_KEYS = ("static_tolerance", "proposal_strategy", "trigger_debounce", "cluster_gap",
-                "min_cluster_cells", "rectangle_padding", "max_update_cells", "static_occupied_cost")
+                "min_cluster_cells", "rectangle_padding", "max_update_cells", "static_occupied_cost",
+                "clearing_margin", "clearing_scans", "clearing_time", "clearing_neighbours", "trigger_memory",
+                "trigger_radius", "memory_on_stuck_feedback")
 
 
 def _flatten(tree, prefix=""):
@@ -129,6 +132,8 @@ class NavParams:
     collision_horizon: float = 0.5
     stall_time: float = 1.5
     sharing_enabled: bool = True
+    # the sharing layer's plan-blocked trigger (the plugin's plan_topics; empty there = off)
+    plan_trigger: bool = True
     sharing: Dict[str, object] = field(default_factory=dict)
     map_wait_log_period: float = 5.0
 
@@ -279,6 +284,7 @@ class NavParams:
                      "map_wait_log_period"):
             num(name, take([name], getattr(cls, name)))
         flag("sharing_enabled", take(["sharing_enabled"], True))
+        flag("plan_trigger", take(["sharing/plan_trigger", "sharing_layer/plan_trigger"], True))
         sharing = {}
         for key in SHARING_KEYS:
             value, _ = take(["sharing/" + key, "sharing_layer/" + key], None)

@@ -15,6 +15,7 @@ from nav_msgs.msg import Path
 from std_msgs.msg import Empty
 
 from fleet_sim.srv import AddBlock, Snapshot
+from sharing_msgs.msg import SharedObstacle
 from fleet_nav.goals import move_base_goal
 
 
@@ -24,6 +25,8 @@ class NavWillow(unittest.TestCase):
         rospy.init_node("nav_willow_scenario")
         cls.stuck = []
         cls.plans = []
+        cls.proposals = []
+        rospy.Subscriber("/robot_0/obstacle_proposals", SharedObstacle, cls.proposals.append)
         rospy.Subscriber("/robot_0/stuck_feedback", Empty, lambda _m: cls.stuck.append(rospy.get_time()))
         rospy.Subscriber("/robot_0/plan", Path, lambda m: cls.plans.append(
             [(p.pose.position.x, p.pose.position.y) for p in m.poses]))
@@ -85,6 +88,15 @@ class NavWillow(unittest.TestCase):
         # move_base reroutes silently: its local planner fails in front of the block, the replan goes
         # round. Nothing in it publishes stuck_feedback.
         self.assertEqual([], self.stuck, "stuck_feedback %d times from a move_base with its defaults" % len(self.stuck))
+        # With move_base's defaults the only trigger is the sharing layer's own plan-blocked one: it
+        # proposes the block when its cells appear on the plan, and nothing else.
+        self.assertTrue(self.proposals, "no obstacle proposed: the plan-blocked trigger did not fire")
+        for proposal in self.proposals:
+            for i in proposal.marked_indexes:
+                cx = proposal.origin_x + (i % proposal.size_x + 0.5) * proposal.resolution
+                cy = proposal.origin_y + (i // proposal.size_x + 0.5) * proposal.resolution
+                self.assertLess(max(abs(cx - bx), abs(cy - by)), size / 2.0 + 0.15,
+                                "proposed cell (%.2f, %.2f) is not on the block at (%.2f, %.2f)" % (cx, cy, bx, by))
         # The last plan goes round: it never comes within the block's half size of its centre.
         last = self.plans[-1]
         nearest = min(math.hypot(px - bx, py - by) for px, py in last)

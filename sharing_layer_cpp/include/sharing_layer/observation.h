@@ -56,6 +56,12 @@ struct ScanTouch
   std::vector<std::uint32_t> marked;    ///< cells set lethal by this scan, sorted, unique
   /// Cells inside the watched rectangles that this scan cleared and did not mark again, sorted, unique.
   std::vector<std::uint32_t> watched_cleared;
+  /// Subset of watched_cleared passed by a beam whose endpoint lies at least the watch's free_margin
+  /// beyond the cell, and holding no endpoint of this scan: evidence of free space, sorted, unique.
+  std::vector<std::uint32_t> watched_free;
+  /// Watched cells holding an endpoint of this scan at any range (also beyond obstacle_range, where
+  /// nothing is marked): evidence of occupancy, sorted, unique.
+  std::vector<std::uint32_t> watched_hit;
 };
 
 }  // namespace sharing_layer

@@ -18,6 +18,17 @@ namespace sharing_layer
 struct ScanWatch
 {
   std::vector<std::uint32_t> cells;  ///< watched cell indexes (duplicates allowed)
+  /// A watched cell counts as seen free (ScanTouch::watched_free) only when a beam passes through it and
+  /// its endpoint lies at least this far (m) beyond the cell. Cleared cells closer to the endpoint are
+  /// reported in watched_cleared only: they may be the face the beam hit, or a neighbour it grazed.
+  double free_margin = 0.0;
+  /// Shadow filter: the endpoint distance used for free_margin is the shortest among a beam and this many
+  /// neighbouring points on each side (observation order = scan order), so beams at an occlusion edge,
+  /// which localisation error moves through the cells hidden behind a corner, see nothing free there.
+  unsigned int free_neighbours = 0;
+  /// Optional: rectangles that together cover every watched cell (e.g. the obstacles' rectangles). Beams
+  /// are tested against these instead of against each cell, which is cheaper when they hold many cells.
+  std::vector<CellRect> regions;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);
@@ -36,7 +47,11 @@ struct ScanWatch
  * for both.
  *
  * The watched cells this scan cleared and did not mark again are returned in watched_cleared, so a
- * caller can tell which known cells this scan saw free. Watched cell indexes must lie in the grid.
+ * caller can tell which known cells this scan saw free; those among them that a beam passed with its
+ * endpoint at least watch.free_margin beyond, and that hold no endpoint of this scan, are also returned in
+ * watched_free (evidence of free space). Watched cells holding an endpoint at any range (usable points
+ * only) are returned in watched_hit (evidence of occupancy, also beyond obstacle_range).
+ * The grid ends exactly as without a watch. Watched cell indexes must lie in the grid.
  *
  * @throws std::invalid_argument when the limits are invalid (grid left untouched)
  */

@@ -65,6 +65,28 @@ private:
   mutable bool present_cache_valid_ = true;  ///< an empty set's cache is right
 };
 
+/// @brief Uninterrupted evidence of free space for one cell: scans that saw it free, and since when.
+struct FreeStreak
+{
+  std::uint16_t scans = 0;
+  double since = 0.0;  ///< time of the first scan of the streak, seconds
+
+  /// @brief Adds a scan that saw the cell free; @return whether the streak now clears it
+  bool add(double now_s, unsigned int min_scans, double min_time)
+  {
+    if (scans == 0)
+    {
+      since = now_s;
+    }
+    if (scans < 0xFFFF)
+    {
+      ++scans;
+    }
+    return scans >= min_scans && now_s - since >= min_time;
+  }
+  void reset() { scans = 0; }
+};
+
 /// @brief A shared obstacle as one robot holds it.
 struct SharedObstacle
 {
@@ -76,6 +98,9 @@ struct SharedObstacle
   double arrival_time = 0.0;     ///< local time of the first update seen
   std::uint64_t max_version = 0; ///< highest version seen
   VersionedCellSet cells;
+  /// Per present cell: this robot's current streak of evidence of free space (local monitoring state,
+  /// never sent).
+  std::unordered_map<std::uint32_t, FreeStreak> free_streaks;
 };
 
 }  // namespace sharing_layer

@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "sharing_layer/cost_grid.h"
@@ -28,10 +30,74 @@ struct LayerParams
   double rectangle_padding = 0.0;          ///< metres added around a proposal's cells
   std::size_t max_update_cells = 1000000;  ///< larger updates are rejected
   std::string robot_name = "robot";        ///< source of this robot's updates
+  // Evidence-based clearing of shared cells and remembered cells (the obstacle grid keeps costmap_2d's rules).
+  double clearing_margin = 0.1;            ///< a beam is evidence of free space only when it ends this far (m) beyond the cell
+  unsigned int clearing_scans = 3;         ///< scans with such evidence, without a sign of occupancy in between, that clear a cell
+  double clearing_time = 1.0;              ///< ... and the time (s) from the first to the last of them
+  unsigned int clearing_neighbours = 8;    ///< shadow filter: beams on each side whose endpoints also bound the evidence
+  // Trigger memory: recently marked non-static cells, for triggers that come after the robot backed off.
+  double trigger_memory = 30.0;            ///< seconds a marked cell is remembered (0: no memory)
+  double trigger_radius = 4.0;             ///< a trigger proposes remembered cells within this distance (m) of the robot
+  /// stuck_feedback comes at the moment of failure, with the block in view (fleet_nav): by default only
+  /// recovery_status and manual triggers (and plan_blocked's clusters on the plan) use the memory, which
+  /// otherwise also proposes bystanders such as another robot waiting within trigger_radius
+  bool memory_on_stuck_feedback = false;
+  // Plan-blocked trigger.
+  double inscribed_radius = 0.25;          ///< new cells within this distance (m) of a plan pose ahead block the plan
 
   /// @throws std::invalid_argument naming the parameter and its value
   void validate() const;
 };
+
+/// @brief Where a trigger came from.
+enum class TriggerSource
+{
+  StuckFeedback,   ///< std_msgs/Empty from a local planner that cannot get past
+  RecoveryStatus,  ///< move_base/recovery_status of an unmodified move_base
+  PlanBlocked,     ///< newly marked cells on the current global plan (checkPlan)
+  Manual,          ///< a test or a tool
+};
+
+/// @return "stuck_feedback", "recovery_status", "plan_blocked" or "manual"
+const char* triggerSourceName(TriggerSource source);
+/// @brief Parses a triggerSourceName(); @throws std::invalid_argument naming the bad value
+TriggerSource parseTriggerSource(const std::string& name);
+
+/// @brief What a trigger did.
+enum class TriggerReason
+{
+  None,           ///< no trigger (checkPlan: nothing new on the plan); nothing to log
+  Proposed,       ///< proposals were made
+  Debounced,      ///< inside the debounce window of an earlier trigger of the same kind
+  NothingMarked,  ///< no non-static cell marked near the robot recently
+  OutOfRange,     ///< remembered cells exist, but none within trigger_radius / obstacle_range of the robot
+  Static,         ///< everything marked near the robot is part of the static map (within static_tolerance)
+  AlreadyShared,  ///< the cells lie in rectangles of obstacles already shared
+  TooSmall,       ///< candidate groups were smaller than min_cluster_cells
+};
+
+/// @return "none", "proposed", "debounced", "nothing_marked", "out_of_range", "static", "already_shared", "too_small"
+const char* triggerReasonName(TriggerReason reason);
+
+/// @brief Outcome of one trigger, for the caller to publish the proposals and log the message.
+struct TriggerReport
+{
+  TriggerSource source = TriggerSource::Manual;
+  TriggerReason reason = TriggerReason::None;
+  bool log = false;                  ///< log the message (once per trigger; repeats of a debounced burst are quiet)
+  std::vector<Proposal> proposals;   ///< empty unless reason == Proposed
+  std::string message;               ///< one human-readable line: source, what was proposed or why nothing
+};
+
+/// @brief A recently marked non-static cell (trigger memory).
+struct RememberedCell
+{
+  double time = 0.0;            ///< last time a scan marked it, seconds
+  float sensor_x = 0.0f;        ///< where the sensor was then (grid frame, m)
+  float sensor_y = 0.0f;
+  FreeStreak free;              ///< evidence of free space since the last sign of occupancy
+};
+
 
 /// @brief Result of one scan.
 struct ScanOutcome
@@ -76,16 +142,64 @@ public:
   void setStaticMap(const std::uint8_t* costs, std::size_t cost_count);
 
   /**
-   * @brief Clears and marks one observation, updates the shareable cells and monitors every shared
-   * obstacle in view. Monitoring diffs are applied here and returned for the handler.
+   * @brief Marks where the a-priori map is unknown (non-zero = unknown; e.g. OccupancyGrid value -1, which
+   * costmap_2d's static layer turns into FREE_SPACE unless track_unknown_space). Unknown cells count as
+   * static, with the same static_tolerance, so they are never shared. nullptr / 0 cells forgets them.
+   * @throws std::invalid_argument on a size mismatch
+   */
+  void setUnknownMap(const std::uint8_t* unknown, std::size_t cell_count);
+
+  /**
+   * @brief Clears and marks one observation, updates the shareable cells and the trigger memory, and
+   * monitors every shared obstacle in view. Monitoring diffs are applied here and returned for the handler.
+   *
+   * A shared cell is reported cleared only on evidence of free space: in at least clearing_scans scans
+   * spanning at least clearing_time seconds a beam passed through it and ended at least clearing_margin
+   * beyond it, and no scan in between showed a sign of occupancy (an endpoint in the cell at any range, or
+   * a beam through it ending less than clearing_margin behind it); scans that do not see the cell do not
+   * interrupt the streak. Remembered cells leave the trigger memory by the same rule. The obstacle grid
+   * itself is cleared and marked with costmap_2d's rules.
    */
   ScanOutcome processScan(const Observation& observation, double now_s);
 
   /// @brief A "cannot get past" signal; @return true when it starts a burst (then call propose)
   bool signalStuck(double now_s) { return trigger_.signal(now_s); }
 
-  /// @brief Groups the current shareable cells into proposals, with the configured strategy.
-  std::vector<Proposal> propose(double robot_x, double robot_y) const;
+  /**
+   * @brief Groups the current shareable cells into proposals, with the configured strategy (the thesis);
+   * with use_memory also the remembered cells within trigger_radius of the robot (marked within
+   * trigger_memory seconds of the last scan) that lie beyond obstacle_range of the last scan's origin,
+   * where the robot can no longer mark them (within it the current view decides).
+   */
+  std::vector<Proposal> propose(double robot_x, double robot_y, bool use_memory = false) const;
+
+  /**
+   * @brief A stuck trigger (stuck_feedback, recovery_status, manual): debounced like signalStuck (one
+   * window for all these sources), then propose(), with the trigger memory for recovery_status and manual
+   * (and stuck_feedback when memory_on_stuck_feedback); the report says what was proposed or why nothing.
+   */
+  TriggerReport trigger(TriggerSource source, double now_s, double robot_x, double robot_y);
+
+  /// @brief The robot's current global plan, world (x, y) poses in the grid's frame, start first.
+  /// Non-finite poses are dropped. An empty plan switches the plan trigger off.
+  void setPlan(const std::vector<std::pair<double, double>>& poses);
+  const std::vector<std::pair<double, double>>& plan() const { return plan_; }
+
+  /**
+   * @brief The plan-blocked trigger, to call after each processScan: cells the last scan newly marked
+   * (not lethal before it), not static, within obstacle_range of the robot and within inscribed_radius of a
+   * plan pose ahead of the robot (from the pose nearest to it on) fire it. It is debounced on its own window
+   * (trigger_debounce) and proposes the clusters (cluster_gap) of shareable and remembered cells that touch
+   * the plan ahead. reason None: nothing new on the plan.
+   */
+  TriggerReport checkPlan(double robot_x, double robot_y, double now_s);
+
+  /// @brief Sets inscribed_radius (e.g. when the footprint changes); @throws std::invalid_argument when
+  /// negative or not finite
+  void setInscribedRadius(double radius_m);
+
+  /// @return remembered cells (trigger memory), sorted
+  std::vector<std::uint32_t> rememberedCells() const;
 
   /**
    * @brief Applies an obstacle from the handler (authorised proposal, or external add/update).
@@ -124,6 +238,18 @@ public:
 
 private:
   void trackShareable(const ScanTouch& touch, const Observation& observation);
+  void rebuildStaticFilter();
+  void dropStaticCandidates();
+  void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, const Observation& observation,
+                double now_s);
+  /// @brief Shareable cells plus remembered cells within trigger_radius of (x, y), not static, not shared.
+  std::vector<std::uint32_t> candidates(double robot_x, double robot_y, bool use_memory) const;
+  std::vector<Proposal> group(const std::vector<std::uint32_t>& cells, double robot_x, double robot_y) const;
+  /// @brief Fills reason and message for a trigger that proposed nothing.
+  void explainNothing(TriggerReport& report, double robot_x, double robot_y, bool use_memory) const;
+  /// @brief Indexes of plan poses ahead of the robot that lie within reach of it.
+  std::vector<std::size_t> planAhead(double robot_x, double robot_y, double reach) const;
+  bool nearPlan(std::uint32_t index, const std::vector<std::size_t>& ahead) const;
   void markDirty(const std::vector<std::uint32_t>& cells);
   bool insideMonitoredRectangle(std::uint32_t index) const { return monitored_[index] != 0; }
   void countRectangle(const CellRect& rect, int delta);
@@ -132,6 +258,16 @@ private:
   CostGrid obstacles_;
   StaticMapFilter static_filter_;
   TriggerDebounce trigger_;
+  TriggerDebounce plan_trigger_;
+  std::vector<std::uint8_t> static_costs_;   ///< last setStaticMap input (empty: none)
+  std::vector<std::uint8_t> unknown_;        ///< last setUnknownMap input (empty: none)
+  std::unordered_map<std::uint32_t, RememberedCell> memory_;
+  std::vector<std::pair<double, double>> plan_;
+  std::vector<std::uint32_t> last_new_marked_;  ///< non-static cells the last scan marked that were not lethal before
+  std::size_t last_static_marked_ = 0;          ///< static cells the last scan marked
+  double last_scan_time_ = 0.0;
+  double last_origin_x_ = 0.0;  ///< sensor origin of the last scan (NaN before the first)
+  double last_origin_y_ = 0.0;
   std::vector<std::uint32_t> shareable_;
   std::vector<std::uint8_t> is_shareable_;
   std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it

@@ -13,7 +13,8 @@ namespace sharing_layer
  *
  * Localisation error shifts walls by a cell or two, so a marked cell within
  * tolerance cells (in x and in y) of an occupied static cell counts as static and is
- * never shared.
+ * never shared. Cells where the a-priori map is unknown count like occupied ones: a robot
+ * sees walls there that the map does not hold, and they are not obstacles to share.
  */
 class StaticMapFilter
 {
@@ -21,10 +22,12 @@ public:
   StaticMapFilter() = default;
   /**
    * @param costs costmap values of the static layer; a cell is occupied when its cost >= occupied_threshold
+   *        (nullptr: none)
+   * @param unknown optional, cost_count values, non-zero where the a-priori map is unknown
    * @throws std::invalid_argument on a size mismatch or a negative tolerance
    */
   StaticMapFilter(const GridGeometry& geometry, const std::uint8_t* costs, std::size_t cost_count, int tolerance,
-                  std::uint8_t occupied_threshold);
+                  std::uint8_t occupied_threshold, const std::uint8_t* unknown = nullptr);
 
   /// @return whether the cell is static within the tolerance (false when no map was given)
   bool isStatic(std::uint32_t index) const { return !near_static_.empty() && near_static_[index] != 0; }

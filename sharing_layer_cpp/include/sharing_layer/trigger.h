@@ -21,10 +21,13 @@ public:
   /// @brief Registers a signal at now_s; @return true when it starts a new burst
   bool signal(double now_s);
   double window() const { return window_; }
+  /// @return signals in the current burst, the last one included (1 right after a burst started)
+  unsigned long burstSignals() const { return burst_signals_; }
 
 private:
   double window_;
   double last_signal_ = -std::numeric_limits<double>::infinity();
+  unsigned long burst_signals_ = 0;
 };
 
 }  // namespace sharing_layer

@@ -1,0 +1,88 @@
+// Test helper: a small world of boxes and 1081-beam 270 degree scans raycast in it, so tests see the
+// beams a real laser gives (grazing rays, faces at any range) rather than hand-placed endpoints.
+#ifndef SHARING_LAYER_TEST_SIM_SCAN_H
+#define SHARING_LAYER_TEST_SIM_SCAN_H
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "sharing_layer/grid_geometry.h"
+#include "sharing_layer/observation.h"
+#include "sharing_layer/raycast.h"
+
+namespace sharing_layer
+{
+namespace test
+{
+/// A world of axis-aligned boxes on a 1 cm grid, so beam endpoints do not sit on 5 cm costmap cell borders.
+class SimWorld
+{
+public:
+  SimWorld(double size_x_m, double size_y_m)
+    : geometry_(0.01, 0.0, 0.0, static_cast<unsigned int>(size_x_m / 0.01), static_cast<unsigned int>(size_y_m / 0.01))
+    , occupancy_(geometry_.cellCount(), 0)
+  {
+  }
+
+  /// Fills [x0, x1) x [y0, y1) with value (1 = solid, 0 = free).
+  void box(double x0, double y0, double x1, double y1, std::uint8_t value = 1)
+  {
+    for (unsigned int y = 0; y < geometry_.size_y; ++y)
+    {
+      const double cy = (y + 0.5) * geometry_.resolution;
+      if (cy < y0 || cy >= y1)
+      {
+        continue;
+      }
+      for (unsigned int x = 0; x < geometry_.size_x; ++x)
+      {
+        const double cx = (x + 0.5) * geometry_.resolution;
+        if (cx >= x0 && cx < x1)
+        {
+          occupancy_[geometry_.getIndex(x, y)] = value;
+        }
+      }
+    }
+  }
+
+  /**
+   * @brief A 270 degree, 1081-beam scan from the true pose (x, y, yaw), its endpoints placed with the
+   * believed pose (x + ex, y + ey, yaw + eyaw), as a robot with localisation error places them.
+   * Max-range readings give no point (laser_geometry drops them).
+   */
+  Observation scan(double x, double y, double yaw, double ex = 0.0, double ey = 0.0, double eyaw = 0.0,
+                   double max_range = 30.0) const
+  {
+    const std::size_t beams = 1081;
+    const double pi = 3.14159265358979323846;
+    std::vector<double> angles(beams);
+    for (std::size_t i = 0; i < beams; ++i)
+    {
+      angles[i] = yaw - 0.75 * pi + i * (1.5 * pi / (beams - 1));
+    }
+    std::vector<float> ranges(beams);
+    raycastRanges(geometry_, occupancy_.data(), occupancy_.size(), x, y, angles.data(), beams, 0.05, max_range,
+                  ranges.data());
+    Observation obs;
+    const double bx = x + ex, by = y + ey;
+    obs.origin = Point3{ bx, by, 0.3 };
+    for (std::size_t i = 0; i < beams; ++i)
+    {
+      if (ranges[i] < max_range)
+      {
+        const double a = angles[i] + eyaw;
+        obs.points.push_back(Point3{ bx + ranges[i] * std::cos(a), by + ranges[i] * std::sin(a), 0.3 });
+      }
+    }
+    return obs;
+  }
+
+private:
+  GridGeometry geometry_;
+  std::vector<std::uint8_t> occupancy_;
+};
+}  // namespace test
+}  // namespace sharing_layer
+
+#endif  // SHARING_LAYER_TEST_SIM_SCAN_H
