@@ -20,6 +20,9 @@ PACKAGES=(
   python3-tf2-msgs libdiagnostic-msgs-dev libvisualization-msgs-dev
   # the MQTT broker, and Node.js/npm for the Coaty JS interop test
   mosquitto nodejs npm
+  # RViz (fleet.launch rviz:=true) and, headless, its config test and make demo's screenshot:
+  # a virtual X server, Mesa's software OpenGL, a font for Qt, and imagemagick's `import`
+  rviz xvfb libgl1-mesa-dri fonts-dejavu-core imagemagick
 )
 
 missing=()
