@@ -78,6 +78,8 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
     (["--robots", "11"], "robots must be 1..10"),
     (["--seed", "x"], "invalid int value: 'x'"),
     (["--obstacle-duration", "0"], "--obstacle-duration and --time-limit must be at least 1 s"),
+    (["--summarize", "/nonexistent/bench"], "--summarize: /nonexistent/bench is not a folder"),
+    (["--summarize", os.path.dirname(os.path.abspath(__file__))], "no bench results"),
 ])
 def test_bench_fleet_refuses_bad_options_before_starting_anything(args, message):
     script = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts", "bench_fleet")
