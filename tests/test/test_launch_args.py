@@ -89,6 +89,14 @@ def test_bench_fleet_refuses_bad_options_before_starting_anything(args, message)
     assert "bench_fleet_" not in proc.stdout + proc.stderr      # no run (log folder) was started
 
 
+def test_rviz_true_adds_rviz_on_the_fleet_config():
+    rc, out = nodes("rviz:=true")
+    assert rc == 0 and "/rviz" in out.split(), out
+    p = subprocess.run(["roslaunch", "--args", "/rviz", "fleet_launch", "fleet.launch", "rviz:=true"],
+                       capture_output=True, text=True, env=ENV, timeout=120)
+    assert re.search(r"rviz -d \S*/config/fleet\.rviz", p.stdout), p.stdout + p.stderr
+
+
 def test_sharing_off_runs_no_handler_bridge_or_broker():
     rc, out = nodes("robots:=2", "sharing:=false")
     assert rc == 0, out
