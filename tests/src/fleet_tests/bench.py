@@ -15,6 +15,19 @@ import rospy
 from fleet_tests.scenario import Fleet, ScenarioError, load_facility, percentile, wait_for_sim_time
 
 
+def entered_blocked(track, block, corridor, reach, depth=1.0):
+    """True when the robot drove into the blocked corridor: near_block, or a track point on the start
+    side of the block at least depth metres past the corridor's mouth (its start-side end, min_y:
+    both layouts' corridors run up from the start hall). In the facility the blocks sit 1.7 m past
+    the mouths and robots stop below them, so near_block decides; in the dead end robots drive ~7 m
+    in and turn 2.4-2.6 m before the block, so the depth rule does."""
+    if near_block(track, block, reach):
+        return True
+    by = block["pose"][1]
+    x0, y0, x1, _y1 = corridor
+    return any(x0 <= x <= x1 and y0 + depth <= y < by for _t, x, y in track)
+
+
 def near_block(track, block, reach):
     """True when a track point on the start side (below) comes within reach (m) of the block's centre
     line: the robot drove into the corridor's mouth far enough to mark the block (obstacle_range 2.5 m)."""
@@ -75,7 +88,9 @@ def main(argv=None):
         arrive = [t for t, x, y in robot.track if t >= sent[robot.name] and math.hypot(x - gx, y - gy) < 0.3]
         times[robot.name] = (arrive[0] if arrive else sent[robot.name] + results[robot.name]) - sent[robot.name]
     blocks = fleet.facility["blocks"]
-    entered = sum(1 for r in fleet.robots if any(near_block(r.track, b, 2.4) for b in blocks.values()))
+    corridors = fleet.facility["corridors"]
+    entered = sum(1 for r in fleet.robots if any(entered_blocked(r.track, b, corridors[b["corridor"]], 2.4)
+                                                 for b in blocks.values()))
     lat = [x * 1000.0 for x in fleet.latencies()]
     rospy.sleep(2.5)  # one more /diagnostics round from every bridge
     bytes_pub = 0
