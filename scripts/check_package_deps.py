@@ -43,7 +43,7 @@ ROS_PACKAGES = {
     "rospy", "roscpp", "rostest", "rosbag", "rosgraph", "rosnode", "roslaunch", "rosservice", "rostopic",
     "actionlib", "tf", "tf2", "tf2_ros", "tf2_py", "tf2_sensor_msgs", "tf2_geometry_msgs", "costmap_2d",
     "pluginlib", "laser_geometry", "message_filters", "dynamic_reconfigure", "voxel_grid", "topic_tools",
-    "map_server", "stage_ros", "move_base", "angles", "rviz", "message_generation", "message_runtime",
+    "map_server", "stage_ros", "move_base", "angles", "rviz", "message_generation", "message_runtime", "genpy",
 }
 # C++ include folders that are not a package of the same name.
 CPP_INCLUDES = {"ros": "roscpp", "pybind11": "pybind11-dev", "gtest": "gtest", "gmock": "gtest"}

@@ -2,9 +2,10 @@
 """make demo: the thesis's Tests 1-3 in the simulated facility, headless and faster than real
 time, each on its own ROS master (fleet.launch, two robots sharing over a private mosquitto).
 Writes out/report.md with a picture per step (each robot's view beside the world), a timeline of
-the sharing events and the metrics table, and prints where it is.
+the sharing events, the metrics table and a screenshot of RViz (fleet_launch's config/fleet.rviz,
+headless under Xvfb) taken during the first test, and prints where it is.
 
-Usage: scripts/run_demo.py [--speedup 3] [--tests 1 2 3] [--out out]   (workspace sourced)
+Usage: scripts/run_demo.py [--speedup 3] [--tests 1 2 3] [--out out] [--no-rviz]   (workspace sourced)
 """
 import argparse
 import json
@@ -41,7 +42,7 @@ def stop(proc):
             proc.wait()
 
 
-def run_test(test, args, out, logs):
+def run_test(test, args, out, logs, extra=()):
     port = free_port()
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1",
                ROS_HOSTNAME="127.0.0.1", ROS_HOME=logs)
@@ -51,8 +52,8 @@ def run_test(test, args, out, logs):
                                "speedup:=%s" % args.speedup, "obstacle_duration:=%d" % duration],
                               stdout=launch_log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
     try:
-        node = subprocess.run([sys.executable, "-m", "fleet_tests.demo", "--test", str(test), "--out", out],
-                              env=env, timeout=args.time_limit)
+        node = subprocess.run([sys.executable, "-m", "fleet_tests.demo", "--test", str(test), "--out", out]
+                              + list(extra), env=env, timeout=args.time_limit)
         return node.returncode
     except subprocess.TimeoutExpired:
         print("[demo test %d] did not finish within %d s" % (test, args.time_limit), flush=True)
@@ -97,6 +98,29 @@ def timeline(results, path):
     img.save(path)
 
 
+def rviz_section(results):
+    """The RViz screenshot of the first test that has one, with what the config check found."""
+    for r in results:
+        rv = r.get("rviz")
+        if not rv:
+            continue
+        lines = ["## RViz", ""]
+        if "png" not in rv:
+            return lines + ["No RViz screenshot: %s" % rv.get("error", "unknown reason"), ""]
+        lines += ["![rviz](%s)" % rv["png"], "",
+                  "RViz (`roslaunch fleet_launch fleet.launch rviz:=true`, config `config/fleet.rviz`) during %s, "
+                  "step %d: %s. The map (walls black), robot_0's global costmap faint over it (robot_1's is off by "
+                  "default), shared obstacles as magenta markers, and in each robot's colour (robot_0 blue, "
+                  "robot_1 green) its pose arrow, plan and laser scan."
+                  % (CAPTIONS[r["test"]], rv["step"], rv["caption"]), ""]
+        if rv.get("problems"):
+            lines += ["**RViz config problems:**", ""] + ["- " + p for p in rv["problems"]] + [""]
+        else:
+            lines += ["The config loaded without problems (no error or warning from rviz, every property kept).", ""]
+        return lines
+    return []
+
+
 def report(results, out, elapsed, failed):
     lines = ["# Fleet obstacle sharing - demo report", "",
              "The thesis's three tests in the facility world (fleet_launch/worlds, after Figure 5.1), two robots "
@@ -105,6 +129,7 @@ def report(results, out, elapsed, failed):
              "footprint blue, plan green) and the simulated world (blocks red)." % elapsed, ""]
     if failed:
         lines += ["**Failed steps:** " + ", ".join(failed), ""]
+    lines += rviz_section(results)
     lines += ["## Timeline of sharing events", "", "![timeline](timeline.png)", "",
               "Simulated seconds from each test's start. Rows per test and robot: stuck events, first shares, "
               "updates sent, messages received from the fleet, local expiries; orange ticks are the frames.", ""]
@@ -140,6 +165,7 @@ def main():
     parser.add_argument("--tests", type=int, nargs="+", default=[1, 2, 3], choices=[1, 2, 3])
     parser.add_argument("--out", default=os.path.join(ROOT, "out"))
     parser.add_argument("--time-limit", type=int, default=400, help="wall seconds per test")
+    parser.add_argument("--no-rviz", action="store_true", help="no RViz screenshot")
     args = parser.parse_args()
     if args.speedup <= 0:
         parser.error("--speedup must be > 0, got %s" % args.speedup)
@@ -149,14 +175,16 @@ def main():
     out = os.path.abspath(args.out)
     os.makedirs(out, exist_ok=True)
     for old in os.listdir(out):
-        if old.startswith("test") and old.endswith((".png", ".json")):
+        if (old.startswith("test") or old == "rviz.png") and old.endswith((".png", ".json")):
             os.remove(os.path.join(out, old))
     logs = tempfile.mkdtemp(prefix="fleet_demo_")
     start = time.time()
     results, failed = [], []
     for k, test in enumerate(args.tests, 1):
         print("[demo %d/%d] %s (speedup %g)" % (k, len(args.tests), CAPTIONS[test], args.speedup), flush=True)
-        rc = run_test(test, args, out, logs)
+        # RViz once, in the first test, its screenshot at step 2 (Test 1: both blocks shared)
+        extra = ["--rviz", os.path.join(out, "rviz.png")] if k == 1 and not args.no_rviz else []
+        rc = run_test(test, args, out, logs, extra)
         path = os.path.join(out, "test%d.json" % test)
         if rc != 0 or not os.path.exists(path):
             failed.append("Test %d (exit %d; logs in %s)" % (test, rc, logs))

@@ -22,6 +22,9 @@ PACKAGES=(
   mosquitto nodejs npm
   # openssl CLI: the TLS tests make a CA and per-robot certificates (coaty_bridge.pki)
   openssl
+  # RViz (fleet.launch rviz:=true) and, headless, its config test and make demo's screenshot:
+  # a virtual X server, Mesa's software OpenGL, a font for Qt, and imagemagick's `import`
+  rviz xvfb libgl1-mesa-dri fonts-dejavu-core imagemagick
 )
 
 missing=()

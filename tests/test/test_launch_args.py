@@ -1,4 +1,5 @@
-"""fleet.launch refuses bad arguments with the argument's name, and builds 1..10 robots."""
+"""fleet.launch refuses bad arguments with the argument's name, builds 1..10 robots, and picks the
+world, map and goals of the layout it is given; bench_fleet refuses a bad layout likewise."""
 import os
 import re
 import socket
@@ -23,6 +24,8 @@ def nodes(*args):
     ("obstacle_duration:=0", "obstacle_duration_must_be_at_least_1_second"),
     ("localisation_error:=-0.1", "localisation_error_must_be_non_negative"),
     ("localisation_error_yaw:=-1", "localisation_error_must_be_non_negative"),
+    ("layout:=nowhere", "layout_must_be_facility_or_deadend"),
+    ("layout:=Facility", "layout_must_be_facility_or_deadend"),
 ])
 def test_bad_argument_is_refused_with_its_name(arg, name):
     rc, out = nodes(arg)
@@ -40,6 +43,58 @@ def test_each_robot_gets_its_namespace(robots):
             assert "/robot_%d/%s" % (i, node) in listed, out
     assert "/robot_%d/move_base" % robots not in listed
     assert {"/fleet_sim", "/map_server", "/fleet_broker"} <= listed
+
+
+def params(*args):
+    proc = subprocess.run(["roslaunch", "--dump-params", "fleet_launch", "fleet.launch"] + list(args),
+                          capture_output=True, text=True, env=ENV, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    out = {}
+    for line in proc.stdout.splitlines():
+        key, sep, value = line.partition(": ")
+        if sep:
+            out[key.strip()] = value.strip()
+    return out
+
+
+@pytest.mark.parametrize("layout, robots, goals", [
+    (None, 2, "goals.yaml"),
+    ("facility", 5, "goals.yaml"),
+    ("deadend", 2, "deadend_goals.yaml"),
+    ("deadend", 10, "deadend_goals.yaml"),
+])
+def test_layout_selects_world_map_and_goals(layout, robots, goals):
+    p = params("robots:=%d" % robots, *(["layout:=" + layout] if layout else []))
+    name = layout or "facility"
+    assert os.path.basename(p["/fleet_sim/world"]) == "%s_%d.world" % (name, robots), p
+    assert os.path.basename(p["/fleet_sim/map_yaml"]) == name + ".yaml", p
+    assert os.path.basename(p["/fleet/goals"]) == goals, p
+    for key in ("/fleet_sim/world", "/fleet_sim/map_yaml", "/fleet/goals"):
+        assert os.path.isfile(p[key]), p[key]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--layout", "nowhere"], "--layout must be one of facility, deadend, got 'nowhere'"),
+    (["--robots", "11"], "robots must be 1..10"),
+    (["--seed", "x"], "invalid int value: 'x'"),
+    (["--obstacle-duration", "0"], "--obstacle-duration and --time-limit must be at least 1 s"),
+    (["--summarize", "/nonexistent/bench"], "--summarize: /nonexistent/bench is not a folder"),
+    (["--summarize", os.path.dirname(os.path.abspath(__file__))], "no bench results"),
+])
+def test_bench_fleet_refuses_bad_options_before_starting_anything(args, message):
+    script = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts", "bench_fleet")
+    proc = subprocess.run(["/usr/bin/python3", script] + args, capture_output=True, text=True, env=ENV, timeout=60)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert message in proc.stderr, proc.stderr
+    assert "bench_fleet_" not in proc.stdout + proc.stderr      # no run (log folder) was started
+
+
+def test_rviz_true_adds_rviz_on_the_fleet_config():
+    rc, out = nodes("rviz:=true")
+    assert rc == 0 and "/rviz" in out.split(), out
+    p = subprocess.run(["roslaunch", "--args", "/rviz", "fleet_launch", "fleet.launch", "rviz:=true"],
+                       capture_output=True, text=True, env=ENV, timeout=120)
+    assert re.search(r"rviz -d \S*/config/fleet\.rviz", p.stdout), p.stdout + p.stderr
 
 
 def test_sharing_off_runs_no_handler_bridge_or_broker():

@@ -1,7 +1,8 @@
 """One run of the fleet-benefit bench (python3 -m fleet_tests.bench --robots N --out FILE), against
 fleet.launch with N robots on its own master (tests/scripts/bench_fleet starts it). Robots are sent
 one after another (every --interval simulated seconds, robot_0 first) to their parking spots in
-the goal area, behind the two blocked corridors; the run ends when every robot has finished.
+the goal area, behind the blocked corridors; the run ends when every robot has finished. Goals,
+corridors and blocks come from the launch's layout (/fleet/goals, else the facility's goals.yaml).
 Writes FILE (JSON): stuck events, robots that drove into a blocked corridor's mouth, time to goal
 per robot, distance driven, bytes published by the bridges, detection -> peer latency."""
 import argparse
@@ -11,7 +12,20 @@ import sys
 
 import rospy
 
-from fleet_tests.scenario import Fleet, ScenarioError, percentile, wait_for_sim_time
+from fleet_tests.scenario import Fleet, ScenarioError, load_facility, percentile, wait_for_sim_time
+
+
+def entered_blocked(track, block, corridor, reach, depth=1.0):
+    """True when the robot drove into the blocked corridor: near_block, or a track point on the start
+    side of the block at least depth metres past the corridor's mouth (its start-side end, min_y:
+    both layouts' corridors run up from the start hall). In the facility the blocks sit 1.7 m past
+    the mouths and robots stop below them, so near_block decides; in the dead end robots drive ~7 m
+    in and turn 2.4-2.6 m before the block, so the depth rule does."""
+    if near_block(track, block, reach):
+        return True
+    by = block["pose"][1]
+    x0, y0, x1, _y1 = corridor
+    return any(x0 <= x <= x1 and y0 + depth <= y < by for _t, x, y in track)
 
 
 def near_block(track, block, reach):
@@ -36,7 +50,12 @@ def main(argv=None):
     args = parser.parse_args(rospy.myargv(argv or sys.argv)[1:])
     wait_for_sim_time()
     rospy.init_node("bench_fleet_run")
-    fleet = Fleet(args.robots)
+    try:
+        facility = load_facility(rospy.get_param("/fleet/goals", None))
+    except ScenarioError as err:
+        print("bench: %s" % err)
+        return 2
+    fleet = Fleet(args.robots, facility=facility)
     goals = fleet.facility["bench_goals"]
     if args.robots > len(goals):
         print("bench: %d robots but only %d bench_goals in %s" % (args.robots, len(goals), fleet.facility["path"]))
@@ -69,7 +88,9 @@ def main(argv=None):
         arrive = [t for t, x, y in robot.track if t >= sent[robot.name] and math.hypot(x - gx, y - gy) < 0.3]
         times[robot.name] = (arrive[0] if arrive else sent[robot.name] + results[robot.name]) - sent[robot.name]
     blocks = fleet.facility["blocks"]
-    entered = sum(1 for r in fleet.robots if any(near_block(r.track, b, 2.4) for b in blocks.values()))
+    corridors = fleet.facility["corridors"]
+    entered = sum(1 for r in fleet.robots if any(entered_blocked(r.track, b, corridors[b["corridor"]], 2.4)
+                                                 for b in blocks.values()))
     lat = [x * 1000.0 for x in fleet.latencies()]
     rospy.sleep(2.5)  # one more /diagnostics round from every bridge
     bytes_pub = 0
@@ -88,6 +109,11 @@ def main(argv=None):
         "time_to_goal": times,
         "time_mean": sum(times.values()) / len(times) if times else float("nan"),
         "time_p95": percentile(list(times.values()), 95),
+        "time_sd": (math.sqrt(sum((v - sum(times.values()) / len(times)) ** 2 for v in times.values())
+                              / (len(times) - 1)) if len(times) > 1 else float("nan")),
+        "time_min": min(times.values()) if times else float("nan"),
+        "time_max": max(times.values()) if times else float("nan"),
+        "goals_file": facility["path"],
         "distance_m": sum(r.distance for r in fleet.robots),
         "bytes_on_bus": bytes_pub,
         "shared_obstacles": sum(len(r.shares()) for r in fleet.robots),

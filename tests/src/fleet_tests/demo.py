@@ -1,27 +1,67 @@
 """One test of the demo (python3 -m fleet_tests.demo --test N --out DIR), run by scripts/run_demo.py
 against a fleet.launch on its own master. Drives the steps of the thesis's Test N, takes a frame
 per step (each robot's view and the world, side by side) and writes DIR/testN.json with the
-steps, the sharing events and the metrics. No assertions: the rostests assert; this shows."""
+steps, the sharing events and the metrics. No assertions: the rostests assert; this shows.
+With --rviz PNG, RViz runs on fleet_launch's config/fleet.rviz under a virtual X server
+(fleet_tests.rviz_shot) and PNG is a screenshot of it at the step named by --rviz-step; what is
+wrong with the config, if anything, goes into testN.json ("rviz")."""
 import argparse
 import json
 import math
 import os
 import sys
+import tempfile
 
+import rospkg
 import rospy
 from PIL import Image, ImageDraw
 
+from fleet_tests.rviz_shot import RvizError, RvizSession
 from fleet_tests.scenario import Fleet, ScenarioError, percentile, wait_for_sim_time
 
 TILT = 0.2
 
 
 class Demo:
-    def __init__(self, test, out):
+    def __init__(self, test, out, rviz_png=None, rviz_step=2):
         self.test, self.out = test, out
         self.fleet = Fleet(2)
         self.steps = []
         self.goals = []
+        self.rviz_png, self.rviz_step = rviz_png, rviz_step
+        self.rviz = None
+        self.rviz_result = None     # for testN.json: screenshot, step, config problems or the reason there is none
+
+    def start_rviz(self):
+        if not self.rviz_png:
+            return
+        config = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "config", "fleet.rviz")
+        try:
+            self.rviz = RvizSession(config, tempfile.mkdtemp(prefix="demo_rviz_"), node_name="demo_rviz")
+            self.rviz.start()
+            self.rviz.wait_ready(120.0)
+        except RvizError as err:
+            self.progress("no RViz screenshot: %s" % err)
+            self.rviz_result = {"error": str(err)}
+            self.stop_rviz()
+
+    def rviz_shot(self, k, caption):
+        if self.rviz is None or k != self.rviz_step:
+            return
+        try:
+            rospy.sleep(2.0)        # a few more frames of what the step left behind
+            self.rviz.screenshot(self.rviz_png)
+            self.rviz_result = {"png": os.path.basename(self.rviz_png), "step": k, "caption": caption,
+                                "problems": self.rviz.config_problems()}
+            self.progress("RViz screenshot at step %d: %s" % (k, self.rviz_png))
+        except (RvizError, rospy.ROSException, OSError) as err:
+            self.rviz_result = {"error": str(err)}
+        self.stop_rviz()
+
+    def stop_rviz(self):
+        if self.rviz is not None:
+            self.rviz.stop()
+            self.rviz = None
 
     def progress(self, text):
         print("[demo test %d] %s" % (self.test, text), flush=True)
@@ -53,6 +93,7 @@ class Demo:
             os.remove(p)
         self.steps.append({"step": k, "caption": caption, "t": rospy.get_time(), "png": os.path.basename(base + ".png")})
         self.progress("step %d: %s" % (k, caption))
+        self.rviz_shot(k, caption)
 
     def go(self, robot, goal, timeout=300.0):
         t0 = rospy.get_time()
@@ -64,6 +105,7 @@ class Demo:
     def run(self):
         f = self.fleet
         f.wait_ready(120.0)
+        self.start_rviz()
         r0, r1 = f.robots
         self.frame("start: robot_0 (blue) and robot_1 (green) bottom right, blocks in the right and middle corridors")
         if self.test == 1:
@@ -138,22 +180,29 @@ class Demo:
         }
         with open(os.path.join(self.out, "test%d.json" % self.test), "w") as fp:
             json.dump({"test": self.test, "steps": self.steps, "goals": self.goals, "events": self.events(),
-                       "metrics": metrics}, fp, indent=1)
+                       "metrics": metrics, "rviz": self.rviz_result}, fp, indent=1)
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--test", type=int, choices=[1, 2, 3], required=True)
     parser.add_argument("--out", required=True)
+    parser.add_argument("--rviz", metavar="PNG", help="run RViz (fleet.rviz, headless) and save a screenshot here")
+    parser.add_argument("--rviz-step", type=int, default=2, help="the step whose frame the screenshot goes with")
     args = parser.parse_args(rospy.myargv(argv or sys.argv)[1:])
+    if args.rviz_step < 1:
+        parser.error("--rviz-step must be >= 1")
     os.makedirs(args.out, exist_ok=True)
     wait_for_sim_time()
     rospy.init_node("demo_test%d" % args.test)
+    demo = Demo(args.test, os.path.abspath(args.out), args.rviz and os.path.abspath(args.rviz), args.rviz_step)
     try:
-        Demo(args.test, os.path.abspath(args.out)).run()
+        demo.run()
     except (ScenarioError, rospy.ServiceException, rospy.ROSException) as err:
         print("[demo test %d] failed: %s" % (args.test, err), flush=True)
         return 1
+    finally:
+        demo.stop_rviz()
     return 0
 
 

@@ -1,0 +1,203 @@
+"""The worlds fleet.launch can run (fleet_launch/worlds, layout:=facility|deadend) load in our
+simulator, their maps agree with the simulated walls, and their goals files describe them.
+
+For each layout: the world loads strictly with 1, 2 and 10 robots at the start slots; the map
+served by map_server is the floorplan the simulator rasterises, cell by cell, in the same frame
+(map frame = Stage world frame); the blocks of the goals file are the world's blocks and are not
+in the map; a robot's laser endpoints lie on mapped walls, or on a block where the map is free.
+For the dead-end layout also what makes it the scenario it is: the straight way is the long
+corridor, the block turns it into a dead end, and the detour is much longer.
+"""
+import heapq
+import math
+import os
+
+import numpy as np
+import pytest
+import rospkg
+import yaml
+from scipy import ndimage
+
+from fleet_sim import frames
+from fleet_sim.map_io import load_map_yaml
+from fleet_sim.raycast import core_raycaster
+from fleet_sim.sim import Simulation
+from fleet_sim.world import load_world
+from fleet_sim.world.raster import GridGeometry, paint_floorplan
+from fleet_tests.scenario import load_facility
+
+WORLDS = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "worlds")
+LAYOUTS = {"facility": "goals.yaml", "deadend": "deadend_goals.yaml"}
+INSCRIBED = 0.345     # fleet_nav's inscribed radius of the pr2 footprint (its start-up log line)
+
+
+def world_path(layout, robots):
+    return os.path.join(WORLDS, "%s_%d.world" % (layout, robots))
+
+
+def load(layout, robots):
+    problems = []
+    world = load_world(world_path(layout, robots), strict=True,
+                       log=lambda level, msg: problems.append(msg) if level in ("warn", "error") else None)
+    assert not problems and not world.problems, problems + world.problems
+    return world
+
+
+def map_of(layout):
+    return load_map_yaml(os.path.join(WORLDS, layout + ".yaml"))
+
+
+def facility(layout):
+    return load_facility(os.path.join(WORLDS, LAYOUTS[layout]))
+
+
+def occupied_world_grid(m):
+    """Map cells (rows = y up) that are occupied, and their centres in the world frame."""
+    rows, cols = np.mgrid[0:m.height, 0:m.width]
+    x = m.origin[0] + (cols + 0.5) * m.resolution
+    y = m.origin[1] + (rows + 0.5) * m.resolution
+    return m.data == 100, x, y
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+@pytest.mark.parametrize("robots", [1, 2, 10])
+def test_world_loads_with_its_robots_at_the_start_slots(layout, robots):
+    world = load(layout, robots)
+    assert [r.name for r in world.robots] == ["robot_%d" % i for i in range(robots)]
+    goals = facility(layout)["goals"]
+    for i in range(min(robots, 2)):
+        x, y, yaw = goals["start_%d" % i]
+        assert world.robots[i].pose == pytest.approx((x, y, yaw), abs=1e-3)
+    for r in world.robots:
+        assert len(r.rangers) == 1 and r.rangers[0].samples == 1081 and r.rangers[0].range_max == 30.0
+    sim = Simulation(world, raycast=core_raycaster())
+    for k, r in enumerate(sim.robots):          # nobody starts in a wall, a block or another robot
+        assert not sim._collides(r, r.pose), "robot_%d collides at its start" % k
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_map_agrees_with_the_simulated_walls_cell_by_cell(layout):
+    world = load(layout, 1)
+    m = map_of(layout)
+    assert len(world.floorplans) == 1
+    fp = world.floorplans[0]
+    t_world_map = frames.world_from_map(fp.pose, fp.size, m.origin)
+    assert t_world_map == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)     # map frame = Stage world frame
+    geom = GridGeometry.covering(world.bounds(1.0), world.resolution)
+    grid = np.zeros((geom.size_y, geom.size_x), dtype=np.uint8)
+    paint_floorplan(grid, geom, fp)
+    occupied, x, y = occupied_world_grid(m)
+    wx, wy = frames.apply(t_world_map, x, y)
+    gc = np.floor((wx - geom.origin_x) / geom.resolution).astype(int)
+    gr = np.floor((wy - geom.origin_y) / geom.resolution).astype(int)
+    simulated = grid[gr, gc] != 0
+    assert occupied.any() and not occupied.all()
+    assert np.array_equal(simulated, occupied), "%d map cells disagree" % np.count_nonzero(simulated != occupied)
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_goals_file_blocks_are_the_world_blocks_and_not_in_the_map(layout):
+    world = load(layout, 2)
+    desc = facility(layout)
+    assert sorted(b.name for b in world.blocks) == sorted(desc["blocks"])
+    m = map_of(layout)
+    occupied, x, y = occupied_world_grid(m)
+    for b in world.blocks:
+        spec = desc["blocks"][b.name]
+        assert b.pose == pytest.approx(tuple(spec["pose"]), abs=1e-3)
+        assert b.size == pytest.approx(tuple(spec["size"]), abs=1e-3)
+        cx0, cy0, cx1, cy1 = desc["corridors"][spec["corridor"]]
+        assert cx0 <= b.pose[0] <= cx1 and cy0 <= b.pose[1] <= cy1, "%s outside its corridor" % b.name
+        # the middle of the block is free in the map: robots must discover it
+        inner = (abs(x - b.pose[0]) < b.size[0] / 2 - 0.15) & (abs(y - b.pose[1]) < b.size[1] / 2)
+        assert inner.any() and not occupied[inner].any(), "%s is drawn into the map" % b.name
+    for name, g in desc["goals"].items():
+        col, row = int(g[0] / m.resolution), int(g[1] / m.resolution)
+        assert not occupied[row, col], "goal %s lies in a wall" % name
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_laser_endpoints_lie_on_mapped_walls_or_on_blocks(layout):
+    """The alignment check of DESIGN.md §7, at every named goal: at least 99% of the endpoints are
+    within a cell of an occupied map cell, and each other one lies on a block."""
+    world = load(layout, 1)
+    sim = Simulation(world, raycast=core_raycaster())
+    m = map_of(layout)
+    near_wall = ndimage.binary_dilation(m.data == 100, iterations=1)
+    desc = facility(layout)
+    for name, (gx, gy, gyaw) in sorted(desc["goals"].items()):
+        sim.teleport(0, (gx, gy, gyaw))
+        r = sim.robots[0]
+        ranger = r.spec.rangers[0]
+        scan = r.scans[0]
+        sx, sy, sth = frames.compose(r.pose, ranger.pose)
+        hit = scan < ranger.range_max - 1e-3
+        assert hit.all(), "%s: a closed facility, every beam must hit something" % name
+        ang = sth + ranger.beam_angles()
+        ex, ey = sx + scan * np.cos(ang), sy + scan * np.sin(ang)
+        col = np.clip(((ex - m.origin[0]) / m.resolution).astype(int), 0, m.width - 1)
+        row = np.clip(((ey - m.origin[1]) / m.resolution).astype(int), 0, m.height - 1)
+        on_wall = near_wall[row, col]
+        on_block = np.zeros_like(on_wall)
+        for b in world.blocks:
+            dx, dy = frames.apply(frames.inverse(b.pose), ex, ey)
+            on_block |= (np.abs(dx) <= b.size[0] / 2 + 0.05) & (np.abs(dy) <= b.size[1] / 2 + 0.05)
+        assert np.all(on_wall | on_block), "%s: %d endpoints on neither a wall nor a block" % (
+            name, np.count_nonzero(~(on_wall | on_block)))
+        assert np.count_nonzero(on_wall) >= 0.99 * np.count_nonzero(~on_block), name
+
+
+def shortest(free, start, goal, res):
+    """Length in m of the shortest 8-connected path over free cells (inf if none)."""
+    h, w = free.shape
+    dist = {start: 0.0}
+    todo = [(0.0, start)]
+    steps = [(dr, dc, math.hypot(dr, dc)) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
+    while todo:
+        d, (r, c) = heapq.heappop(todo)
+        if (r, c) == goal:
+            return d * res
+        if d > dist[(r, c)]:
+            continue
+        for dr, dc, step in steps:
+            rr, cc = r + dr, c + dc
+            if 0 <= rr < h and 0 <= cc < w and free[rr, cc]:
+                nd = d + step
+                if nd < dist.get((rr, cc), float("inf")):
+                    dist[(rr, cc)] = nd
+                    heapq.heappush(todo, (nd, (rr, cc)))
+    return float("inf")
+
+
+def test_deadend_block_turns_the_straight_way_into_a_long_dead_end():
+    """Where the robot's centre can go (cells farther than the inscribed radius from a wall): the
+    straight way from the start to the goal area runs up the long corridor; with block_far the
+    corridor leads nowhere, and the way round is more than twice as long as the straight one."""
+    m = map_of("deadend")
+    desc = facility("deadend")
+    res = m.resolution
+    walls = m.data == 100
+    occupied, x, y = occupied_world_grid(m)
+    b = desc["blocks"]["block_far"]
+    (bx, by, _yaw), (bsx, bsy) = b["pose"], b["size"]
+    blocked = walls | ((abs(x - bx) <= bsx / 2) & (abs(y - by) <= bsy / 2))
+
+    def free(grid):
+        return ndimage.distance_transform_edt(~grid) * res > INSCRIBED
+
+    def cell(name):
+        gx, gy, _ = desc["goals"][name]
+        return int(gy / res), int(gx / res)
+
+    open_map, closed_map = free(walls), free(blocked)
+    straight = shortest(open_map, cell("start_0"), cell("goal_area"), res)
+    around = shortest(closed_map, cell("start_0"), cell("goal_area"), res)
+    assert straight < 13.0, straight                      # up the long corridor, ~11.8 m
+    assert 2.0 * straight < around < float("inf"), (straight, around)
+    # from the end of the long corridor, the goal area behind the block is reachable only back
+    # through the whole corridor: the far end is a dead end at least 2 x 5 m longer than the door
+    via_door = shortest(open_map, cell("far_end"), cell("goal_area"), res)
+    back_out = shortest(closed_map, cell("far_end"), cell("goal_area"), res)
+    assert via_door < 5.0 and back_out > via_door + 2 * 5.0, (via_door, back_out)
+    cx0, cy0, cx1, cy1 = desc["corridors"]["long"]
+    assert cy1 - cy0 >= 7.5                                # the blocked corridor is long
