@@ -2,6 +2,7 @@
 it can, and the exit code says what failed (README: 2 usage, 3 bag unreadable, 4 no scan topic;
 bits 8 bag damaged, 16 scans dropped for tf, 32 missing topic / bad content)."""
 import io
+import json
 import os
 import shutil
 
@@ -204,3 +205,41 @@ def test_tf_with_bad_values_is_counted(tmp_path):
     code, summary, _text = replay(bag, tmp_path / "out")
     assert code == 32
     assert summary["problems"]["tf_rejected"] == 1 and summary["scans_processed"] == 100
+
+
+def test_plans_in_another_frame_or_with_bad_poses_are_handled_and_a_good_plan_triggers(tmp_path):
+    # The plan-blocked trigger reads <ns>/move_base/NavfnROS/plan: a plan in another frame is
+    # counted and ignored, non-finite poses are dropped, and the rest of the plan still works.
+    import math
+    import rospy
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Path
+
+    def path(frame, points, t):
+        msg = Path()
+        msg.header.frame_id, msg.header.stamp = frame, rospy.Time.from_sec(t)
+        for x, y in points:
+            pose = PoseStamped()
+            pose.pose.position.x, pose.pose.position.y, pose.pose.orientation.w = x, y, 1.0
+            msg.poses.append(pose)
+        return msg
+
+    bag = tmp_path / "plans.bag"
+    synth.write_bag(str(bag), synth.corridor_world(block_x=BLOCK_X), [corridor_robot(stuck=1000.0)], 30.0)
+    line = [(2.0 + 0.05 * k, 6.0) for k in range(460)]
+    topic = "/robot_0/move_base/NavfnROS/plan"
+    with rosbag.Bag(str(bag), "a") as out:
+        out.write(topic, path("robot_0/odom", line, 100.5), rospy.Time.from_sec(100.5))
+        out.write(topic, path("map", [(math.nan, 6.0), (3.0, math.inf)] + line, 101.0), rospy.Time.from_sec(101.0))
+    code, summary, text = replay(bag, tmp_path / "out", "--trigger", "none")
+    assert code == 0, text
+    assert summary["problems"] == {"plans_other_frame": 1}, summary["problems"]
+    assert summary["plans"] == 1 and summary["plan_triggers"] >= 1, text
+    with open(os.path.join(str(tmp_path / "out"), "events.jsonl"), encoding="utf-8") as handle:
+        plans = [json.loads(line) for line in handle if '"plan"' in line]
+    assert [(p["poses"], p["dropped"]) for p in plans if p["event"] == "plan"] == [(460, 2)]
+    # The block across the corridor at x = 20 is shared from the plan trigger alone.
+    assert any(BLOCK_X - 0.3 <= o["rectangle"][0] <= BLOCK_X + 0.3 for o in summary["obstacles"]), summary["obstacles"]
+    # Switched off, the same bag shares nothing.
+    _code, off, _text = replay(bag, tmp_path / "off", "--trigger", "none", "--plan-topics", "none")
+    assert off["obstacles_shared"] == 0 and off["plans"] == 0

@@ -56,6 +56,9 @@ def build_parser():
                    help="robot frame for proposals; prefixed with the namespace (default base_link)")
     g.add_argument("--trigger", default="auto", choices=("auto", "stuck_feedback", "recovery_status", "both", "none"),
                    help="trigger topics: <ns>/stuck_feedback, <ns>/move_base/recovery_status (auto: those present)")
+    g.add_argument("--plan-topics", default="move_base/NavfnROS/plan,move_base/GlobalPlanner/plan",
+                   help="comma-separated nav_msgs/Path topics (relative to each namespace) for the layer's "
+                        "plan-blocked trigger; 'none' switches it off (default: move_base's navfn and global_planner)")
     g.add_argument("--trigger-at", type=_trigger_at, default=[], action="append",
                    help="extra triggers, seconds from the bag start: '19.5,robot_1@40' (repeatable)")
     g = p.add_argument_group("layer and handler parameters")
@@ -136,9 +139,12 @@ def settings_from_args(args):
             layer[key] = value
     trigger_at = tuple(item for group in args.trigger_at for item in group)
     robots = tuple(r.strip().strip("/") for r in args.robots.split(",") if r.strip())
+    plan_topics = () if args.plan_topics.strip() in ("", "none") else tuple(
+        t.strip().strip("/") for t in args.plan_topics.split(",") if t.strip())
     return ReplaySettings(
         scan_topic=args.scan_topic, global_frame=args.global_frame.strip("/"), base_frame=args.base_frame.strip("/"),
         robots=robots, single_robot_name=args.robot_name, trigger=args.trigger, trigger_at=trigger_at,
+        plan_topics=plan_topics,
         tf_max_gap=args.tf_max_gap, tf_tolerance=args.tf_tolerance, tf_wait=args.tf_wait,
         obstacle_duration=args.obstacle_duration, expiry_rate=args.expiry_rate,
         max_cells_per_message=args.max_cells_per_message, wall_distance=args.wall_distance, layer=layer,

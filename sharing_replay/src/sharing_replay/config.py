@@ -46,6 +46,9 @@ class ReplaySettings:
     single_robot_name: str = "robot"        # name of the robot of an un-namespaced bag
     trigger: str = "auto"                   # auto | stuck_feedback | recovery_status | both | none
     trigger_at: Tuple[Tuple[Optional[str], float], ...] = ()  # (robot or None for all, seconds from start)
+    # global-plan topics (nav_msgs/Path) for the layer's plan-blocked trigger, relative to each
+    # namespace; () switches it off. move_base publishes its global planner's plan on one of them.
+    plan_topics: Tuple[str, ...] = ("move_base/NavfnROS/plan", "move_base/GlobalPlanner/plan")
     tf_max_gap: float = 1.0
     tf_tolerance: float = 0.2
     tf_wait: float = 1.0
@@ -76,6 +79,8 @@ class ReplaySettings:
         if not isinstance(self.max_cells_per_message, int) or self.max_cells_per_message < 1:
             raise InputError("max_cells_per_message must be a positive integer, got %r"
                              % (self.max_cells_per_message,))
+        if not all(isinstance(t, str) and t.strip() and " " not in t for t in self.plan_topics):
+            raise InputError("plan_topics must be topic names without spaces, got %r" % (self.plan_topics,))
         if self.trigger not in ("auto", "stuck_feedback", "recovery_status", "both", "none"):
             raise InputError("trigger must be auto, stuck_feedback, recovery_status, both or none; got %r"
                              % (self.trigger,))
@@ -139,8 +144,11 @@ def layer_kwargs_from_tree(tree):
         params, unused = NavParams.from_dict(tree)
     except ParameterError as err:
         raise InputError("bad parameter: %s" % err) from None
+    # inscribed_radius: the plan-blocked trigger looks this far beside the plan, as the plugin does
+    # with its layered costmap's footprint.
     kwargs = dict(obstacle_range=params.obstacle_range, raytrace_range=params.raytrace_range,
-                  min_obstacle_height=params.min_obstacle_height, max_obstacle_height=params.max_obstacle_height)
+                  min_obstacle_height=params.min_obstacle_height, max_obstacle_height=params.max_obstacle_height,
+                  inscribed_radius=params.inscribed_radius)
     kwargs.update(params.sharing)
     return kwargs, params.lethal_cost_threshold, params.track_unknown_space, unused
 

@@ -34,7 +34,11 @@ def exit_code(replay):
 
 def near_wall_mask(static, distance):
     """Cells within `distance` cells (Chebyshev) of a static wall cell."""
-    mask = static >= LETHAL
+    return grow_mask(static >= LETHAL, distance)
+
+
+def grow_mask(mask, distance):
+    """Cells within `distance` cells (Chebyshev) of a cell of mask."""
     if distance <= 0:
         return mask
     out = mask.copy()
@@ -55,14 +59,22 @@ def near_wall_mask(static, distance):
 
 def summarise(replay, bag_path):
     s = replay.settings
-    near = near_wall_mask(replay.static, s.wall_distance).reshape(-1)
+    # A false share lies within wall_distance cells of a cell the a-priori map marks occupied, or of
+    # one it leaves unknown (where Stage may be solid although the map says nothing).
+    near_occupied = near_wall_mask(replay.static, s.wall_distance).reshape(-1)
+    near_unknown = grow_mask(np.asarray(replay.map.occupancy) == -1, s.wall_distance).reshape(-1)
+    near = near_occupied | near_unknown
     obstacles = []
-    cells_total = cells_near = all_near = 0
+    cells_total = cells_near = all_near = cells_near_occupied = cells_near_unknown = 0
     for uuid, rec in sorted(replay.obstacles.items(), key=lambda item: (item[1]["time"], item[0])):
         ever = np.fromiter(rec["cell_time"].keys(), dtype=np.int64, count=len(rec["cell_time"]))
         n_near = int(near[ever].sum()) if ever.size else 0
+        n_occupied = int(near_occupied[ever].sum()) if ever.size else 0
+        n_unknown = int(near_unknown[ever].sum()) if ever.size else 0
         cells_total += int(ever.size)
         cells_near += n_near
+        cells_near_occupied += n_occupied
+        cells_near_unknown += n_unknown
         if ever.size and n_near == ever.size:
             all_near += 1
         obstacles.append({
@@ -70,7 +82,9 @@ def summarise(replay, bag_path):
             "t": round(rec["time"] - replay.start_time, 3),
             "rectangle": [round(v, 4) for v in rec["rectangle"]], "cells_ever": int(ever.size),
             "cells_final": int(ever.size - len(rec["cleared"])), "cells_near_walls": n_near,
+            "cells_near_occupied": n_occupied, "cells_near_unknown": n_unknown,
             "updates": rec["updates"],
+            "ever_indexes": sorted(int(c) for c in rec["cell_time"]),
             "final_indexes": sorted(int(c) for c in rec["cell_time"] if c not in rec["cleared"])})
     events = replay.event_counts
     duration = max(0.0, replay.end_time - replay.start_time)
@@ -84,6 +98,8 @@ def summarise(replay, bag_path):
         "proposals": events.get("proposal", 0),
         "redundant_proposals": sum(r.handler.counters["redundant"] for r in replay.robots.values()),
         "triggers": events.get("trigger", 0),
+        "plan_triggers": events.get("plan_trigger", 0),
+        "plans": events.get("plan", 0),
         "updates": events.get("update", 0),
         "received": events.get("received", 0),
         "expiries": events.get("expiry", 0),
@@ -93,6 +109,7 @@ def summarise(replay, bag_path):
         "bytes_compact": replay.bytes_compact,
         "compact_to_plain": round(replay.bytes_compact / replay.bytes_plain, 4) if replay.bytes_plain else None,
         "false_shares": {"wall_distance_cells": s.wall_distance, "cells_near_walls": cells_near,
+                         "cells_near_occupied": cells_near_occupied, "cells_near_unknown": cells_near_unknown,
                          "cells": cells_total, "obstacles_all_near_walls": all_near},
         "scans_processed": replay.scans,
         "scans_dropped": sum(r.scans_dropped for r in replay.robots.values()),
@@ -105,7 +122,8 @@ def summarise(replay, bag_path):
         "missing_topics": list(replay.missing_topics),
         "notes": {k: list(v) for k, v in replay.notes.items()},
         "parameters": {"layer": dict(s.layer), "obstacle_duration": s.obstacle_duration,
-                       "tf_max_gap": s.tf_max_gap, "tf_tolerance": s.tf_tolerance, "trigger": s.trigger},
+                       "tf_max_gap": s.tf_max_gap, "tf_tolerance": s.tf_tolerance, "trigger": s.trigger,
+                       "plan_topics": list(s.plan_topics)},
         "obstacles": obstacles,
     }
     summary["exit_code"] = exit_code(replay)
@@ -116,12 +134,15 @@ def summary_text(summary):
     fs = summary["false_shares"]
     lines = [
         "bag: %s (%.1f s, robots %s)" % (summary["bag"], summary["bag_duration_s"], ", ".join(summary["robots"])),
-        "obstacles shared: %d (proposals %d, redundant %d, triggers %d)" % (
-            summary["obstacles_shared"], summary["proposals"], summary["redundant_proposals"], summary["triggers"]),
+        "obstacles shared: %d (proposals %d, redundant %d, triggers %d, plan triggers %d)" % (
+            summary["obstacles_shared"], summary["proposals"], summary["redundant_proposals"], summary["triggers"],
+            summary["plan_triggers"]),
         "updates: %d, received by other robots: %d, expiries: %d" % (
             summary["updates"], summary["received"], summary["expiries"]),
-        "cells shared: %d; near walls (within %d cells of the static map): %d cells, %d obstacle(s) entirely" % (
-            summary["cells_shared"], fs["wall_distance_cells"], fs["cells_near_walls"], fs["obstacles_all_near_walls"]),
+        "cells shared: %d; near walls (within %d cells of an occupied or unknown map cell): %d cells (%d near "
+        "occupied, %d near unknown), %d obstacle(s) entirely" % (
+            summary["cells_shared"], fs["wall_distance_cells"], fs["cells_near_walls"], fs["cells_near_occupied"],
+            fs["cells_near_unknown"], fs["obstacles_all_near_walls"]),
         "fleet traffic: %d messages, %d bytes plain, %d bytes compact (ratio %s)" % (
             summary["fleet_messages"], summary["bytes_plain"], summary["bytes_compact"], summary["compact_to_plain"]),
         "scans: %d processed, %d dropped; %.0f scans/s, real-time factor %s (%.2f s wall)" % (

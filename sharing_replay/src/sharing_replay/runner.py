@@ -96,6 +96,8 @@ class _Robot:
             raise InputError("bad layer parameter: %s" % err) from None
         self.core = core.SharingCore(self.geometry, params)
         self.core.set_static_map(replay.static)
+        # Unknown map cells (and cells near them) are never shared, as in the plugin.
+        self.core.set_unknown_map(np.ascontiguousarray(m.occupancy == -1))
         rng = random.Random("%d/%s" % (s.seed, self.name))
         self.handler = SharingHandler(
             self.name, replay.clock, s.obstacle_duration, on_to_layer=self._to_layer,
@@ -142,6 +144,8 @@ class _Robot:
             self.queue.popleft()
             if kind == "scan":
                 self._scan(payload)
+            elif kind == "plan":
+                self._plan(payload, t)
             else:
                 self._trigger(payload, t)
             replay.flush_fleet()
@@ -150,6 +154,31 @@ class _Robot:
         self.replay.emit("trigger", self.name, source=source, pending=self.stuck_pending is None)
         if self.stuck_pending is None:
             self.stuck_pending = t
+
+    def _plan(self, msg, t):
+        """A global plan (nav_msgs/Path) for the plan-blocked trigger; an empty one switches it off."""
+        replay = self.replay
+        frame = (msg.header.frame_id or replay.settings.global_frame).lstrip("/")
+        if frame != replay.settings.global_frame:
+            replay.count("plans_other_frame")
+            replay.note("plans_other_frame", "%s: plan at %.3f in frame %s, not %s: ignored"
+                        % (self.name, t, frame, replay.settings.global_frame))
+            return
+        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=np.float64).reshape(-1, 2)
+        self.core.set_plan(xy)
+        replay.emit("plan", self.name, poses=int(self.core.plan_length), dropped=int(len(xy) - self.core.plan_length))
+
+    def _pose(self, stamp, sensor_xy):
+        """The robot's base in the global frame at stamp, else the laser's position (counted)."""
+        replay = self.replay
+        try:
+            tr = replay.chain.lookup(replay.settings.global_frame, self.base_frame, stamp)
+            return tr[0], tr[1]
+        except TransformError as err:
+            replay.count("proposals_at_sensor_pose")
+            replay.note("proposals_at_sensor_pose", "%s: no pose of %s (%s); using the laser's position instead"
+                        % (self.name, self.base_frame, err))
+            return sensor_xy
 
     def _scan(self, msg):
         replay = self.replay
@@ -185,20 +214,21 @@ class _Robot:
         if self.stuck_pending is not None:
             trigger_time, self.stuck_pending = self.stuck_pending, None
             if self.core.signal_stuck(trigger_time):
-                self._propose(stamp, (sx, sy))
+                rx, ry = self._pose(stamp, (sx, sy))
+                self._propose(self.core.propose(rx, ry), rx, ry)
+        if self.core.plan_length:
+            rx, ry = self._pose(stamp, (sx, sy))
+            report = self.core.check_plan(rx, ry, stamp)
+            if report.reason != "none":
+                if report.log:
+                    replay.emit("plan_trigger", self.name, reason=report.reason,
+                                message=report.message)
+                self._propose(report.proposals, rx, ry)
 
-    def _propose(self, stamp, sensor_xy):
+    def _propose(self, proposals, rx, ry):
         replay = self.replay
-        try:
-            tr = replay.chain.lookup(replay.settings.global_frame, self.base_frame, stamp)
-            rx, ry = tr[0], tr[1]
-        except TransformError as err:
-            replay.count("proposals_at_sensor_pose")
-            replay.note("proposals_at_sensor_pose", "%s: no pose of %s (%s); proposing around the laser instead"
-                        % (self.name, self.base_frame, err))
-            rx, ry = sensor_xy
         from sharing_handler_py.validation import Obstacle, Rectangle
-        for proposal in self.core.propose(rx, ry):
+        for proposal in proposals:
             cells = proposal.cells
             before = self.handler.counters
             obstacle = Obstacle(uuid="", marked=tuple(cells.tolist()), cleared=(), deadline=0,
@@ -406,11 +436,17 @@ class Replay:
             for robot in targets:
                 self.timed_triggers.append((source.start_time + t, robot))
         self.timed_triggers.sort(key=lambda item: item[0])
+        self.plan_topics = {}
+        for robot in self.robots.values():
+            for name in s.plan_topics:
+                topic = _join(robot.ns, name)
+                if topic in topics:
+                    self.plan_topics[topic] = robot
         self.tf_topics = [t for t in ("/tf", "/tf_static") if t in topics]
         if not self.tf_topics:
             self.missing_topics.append("/tf")
             LOG.warning("missing topic /tf: no scan can be placed in %s", s.global_frame)
-        replayed = list(self.robots) + list(self.trigger_topics) + self.tf_topics
+        replayed = list(self.robots) + list(self.trigger_topics) + list(self.plan_topics) + self.tf_topics
         self.total_messages = sum(topics[t][1] for t in replayed)
         return replayed
 
@@ -443,6 +479,8 @@ class Replay:
                 static = topic == "/tf_static"
                 for transform in msg.transforms:
                     self.chain.add(transform, static=static)
+            elif topic in self.plan_topics:
+                self.plan_topics[topic].queue.append(("plan", msg, t))
             else:
                 trigger = self.trigger_topics.get(topic)
                 if trigger is not None:
