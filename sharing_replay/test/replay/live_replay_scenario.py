@@ -102,7 +102,9 @@ class LiveReplay(unittest.TestCase):
         self.assertNotIn("/rosout", topics)
 
         stdout, stderr = io.StringIO(), io.StringIO()
+        # The live run has the plan trigger off (live_replay.test), so the replay has too.
         code, summary = cli.run([self.bag, "--out-dir", os.path.join(self.tmp, "replay"), "--progress", "never",
+                                 "--plan-topics", "none",
                                  "--params", rospy.get_param("~params_file"),
                                  "--obstacle-duration", str(rospy.get_param("~obstacle_duration"))], stdout, stderr)
         report = "live: %s\nreplay:\n%s\n%s" % (
