@@ -7,9 +7,11 @@
 #include <cstdint>
 #include <vector>
 
+#include "sharing_layer/cost_values.h"
 #include "sharing_layer/grid_geometry.h"
 #include "sharing_layer/observation.h"
 #include "sharing_layer/raycast.h"
+#include "sharing_layer/sharing_core.h"
 
 namespace sharing_layer
 {
@@ -82,6 +84,63 @@ private:
   GridGeometry geometry_;
   std::vector<std::uint8_t> occupancy_;
 };
+/// The clearing and trigger tests' world: 10 m x 10 m with 0.2 m outer walls, under a 0.05 m
+/// costmap whose static map knows the walls (4 cells thick).
+constexpr double kWorld = 10.0;
+
+inline GridGeometry grid()
+{
+  return GridGeometry(0.05, 0.0, 0.0, 200, 200);
+}
+
+inline void outerWalls(SimWorld& world)
+{
+  world.box(0.0, 0.0, kWorld, 0.2);
+  world.box(0.0, kWorld - 0.2, kWorld, kWorld);
+  world.box(0.0, 0.0, 0.2, kWorld);
+  world.box(kWorld - 0.2, 0.0, kWorld, kWorld);
+}
+
+inline SimWorld walledWorld()
+{
+  SimWorld world(kWorld, kWorld);
+  outerWalls(world);
+  return world;
+}
+
+inline std::vector<std::uint8_t> staticMap()
+{
+  const GridGeometry g = grid();
+  std::vector<std::uint8_t> costs(g.cellCount(), FREE_SPACE);
+  for (unsigned int y = 0; y < g.size_y; ++y)
+  {
+    for (unsigned int x = 0; x < g.size_x; ++x)
+    {
+      if (x < 4 || y < 4 || x >= g.size_x - 4 || y >= g.size_y - 4)
+      {
+        costs[g.getIndex(x, y)] = LETHAL_OBSTACLE;
+      }
+    }
+  }
+  return costs;
+}
+
+/// The layer's defaults (obstacle_range 2.5, raytrace_range 3.0: the tutorials' and costmap_2d's).
+inline LayerParams defaults()
+{
+  LayerParams p;
+  p.robot_name = "robot_0";
+  return p;
+}
+
+/// A core on grid() that knows the outer walls from its static map.
+inline SharingCore makeCore(const LayerParams& p = defaults())
+{
+  SharingCore core(grid(), p);
+  const std::vector<std::uint8_t> costs = staticMap();
+  core.setStaticMap(costs.data(), costs.size());
+  return core;
+}
 }  // namespace test
 }  // namespace sharing_layer
 

@@ -17,54 +17,14 @@
 #include "sim_scan.h"
 
 using namespace sharing_layer;
-using sharing_layer::test::SimWorld;
+using namespace sharing_layer::test;
 
 namespace
 {
-constexpr double kWorld = 10.0;
-
-/// Outer walls 0.2 m thick; the static map knows them, not the block.
-void walls(SimWorld& world)
-{
-  world.box(0.0, 0.0, kWorld, 0.2);
-  world.box(0.0, kWorld - 0.2, kWorld, kWorld);
-  world.box(0.0, 0.0, 0.2, kWorld);
-  world.box(kWorld - 0.2, 0.0, kWorld, kWorld);
-}
-
 /// The block: 0.45 m x 0.95 m, its west face at x = 5.02 (inside a 5 cm cell, not on its border).
 void block(SimWorld& world, std::uint8_t value = 1)
 {
   world.box(5.02, 4.53, 5.47, 5.48, value);
-}
-
-GridGeometry grid()
-{
-  return GridGeometry(0.05, 0.0, 0.0, 200, 200);
-}
-
-std::vector<std::uint8_t> staticMap()
-{
-  const GridGeometry g = grid();
-  std::vector<std::uint8_t> costs(g.cellCount(), FREE_SPACE);
-  for (unsigned int y = 0; y < g.size_y; ++y)
-  {
-    for (unsigned int x = 0; x < g.size_x; ++x)
-    {
-      if (x < 4 || y < 4 || x >= g.size_x - 4 || y >= g.size_y - 4)
-      {
-        costs[g.getIndex(x, y)] = LETHAL_OBSTACLE;
-      }
-    }
-  }
-  return costs;
-}
-
-LayerParams defaults()
-{
-  LayerParams p;  // obstacle_range 2.5, raytrace_range 3.0: the tutorials' and costmap_2d's defaults
-  p.robot_name = "robot_0";
-  return p;
 }
 
 /// A robot at (3.6, 5.0) facing the block 1.42 m ahead proposes it; the handler authorises it.
@@ -180,13 +140,10 @@ TEST(EvidenceClearing, ScanReportsFreeEvidenceOnlyMarginBeforeTheEndpoint)
 
 TEST(EvidenceClearing, BlockSurvivesRobotsDrivingPastAndAwayWithUpstreamDefaults)
 {
-  SimWorld world(kWorld, kWorld);
-  walls(world);
+  SimWorld world = walledWorld();
   block(world);
-  const std::vector<std::uint8_t> costs = staticMap();
 
-  SharingCore core(grid(), defaults());
-  core.setStaticMap(costs.data(), costs.size());
+  SharingCore core = makeCore();
   const std::vector<std::uint32_t> face = shareBlock(core, world);
   ASSERT_GE(face.size(), 15u);  // the 0.95 m face is 19-20 cells
 
@@ -205,29 +162,23 @@ TEST(EvidenceClearing, SameDrivesErodeTheBlockWithSingleScanRaytraceClearing)
 {
   // The scenario reproduces the reported erosion when every raytraced cell counts (margin 0, one scan): so the
   // test above fails if the evidence rule stops holding.
-  SimWorld world(kWorld, kWorld);
-  walls(world);
+  SimWorld world = walledWorld();
   block(world);
-  const std::vector<std::uint8_t> costs = staticMap();
   LayerParams p = defaults();
   p.clearing_margin = 0.0;
   p.clearing_scans = 1;
   p.clearing_time = 0.0;
   p.clearing_neighbours = 0;
-  SharingCore core(grid(), p);
-  core.setStaticMap(costs.data(), costs.size());
+  SharingCore core = makeCore(p);
   shareBlock(core, world);
   EXPECT_GT(driveAwayAndPast(core, world).cleared, 5u);
 }
 
 TEST(EvidenceClearing, RemovedBlockIsClearedAfterClearingScansAndTheUpdateShared)
 {
-  SimWorld world(kWorld, kWorld);
-  walls(world);
+  SimWorld world = walledWorld();
   block(world);
-  const std::vector<std::uint8_t> costs = staticMap();
-  SharingCore core(grid(), defaults());
-  core.setStaticMap(costs.data(), costs.size());
+  SharingCore core = makeCore();
   const std::vector<std::uint32_t> face = shareBlock(core, world);
   ASSERT_FALSE(face.empty());
 
@@ -249,12 +200,9 @@ TEST(EvidenceClearing, RemovedBlockIsClearedAfterClearingScansAndTheUpdateShared
 
 TEST(EvidenceClearing, TheStreakNeedsClearingScansAndClearingTime)
 {
-  SimWorld world(kWorld, kWorld);
-  walls(world);
+  SimWorld world = walledWorld();
   block(world);
-  const std::vector<std::uint8_t> costs = staticMap();
-  SharingCore core(grid(), defaults());
-  core.setStaticMap(costs.data(), costs.size());
+  SharingCore core = makeCore();
   const std::vector<std::uint32_t> face = shareBlock(core, world);
   ASSERT_FALSE(face.empty());
   block(world, 0);
@@ -272,8 +220,7 @@ TEST(EvidenceClearing, TheStreakNeedsClearingScansAndClearingTime)
   LayerParams p = defaults();
   p.clearing_time = 0.0;
   p.clearing_scans = 3;
-  SharingCore two(grid(), p);
-  two.setStaticMap(costs.data(), costs.size());
+  SharingCore two = makeCore(p);
   block(world, 1);
   shareBlock(two, world);
   EXPECT_TRUE(two.processScan(through, 2.0).updates.empty());
@@ -283,12 +230,9 @@ TEST(EvidenceClearing, TheStreakNeedsClearingScansAndClearingTime)
 
 TEST(EvidenceClearing, AHitInBetweenStartsTheEvidenceAgain)
 {
-  SimWorld world(kWorld, kWorld);
-  walls(world);
+  SimWorld world = walledWorld();
   block(world);
-  const std::vector<std::uint8_t> costs = staticMap();
-  SharingCore core(grid(), defaults());
-  core.setStaticMap(costs.data(), costs.size());
+  SharingCore core = makeCore();
   const std::vector<std::uint32_t> face = shareBlock(core, world);
   ASSERT_FALSE(face.empty());
   const Observation with_block = world.scan(3.6, 5.0, 0.0);
@@ -310,12 +254,9 @@ TEST(EvidenceClearing, OwnObstacleGridKeepsCostmapSemantics)
   // The layer's own grid still clears what raytracing passes, as costmap_2d's ObstacleLayer: a block face
   // 2.7 m away (beyond obstacle_range, within raytrace_range) is cleared there and not re-marked, while the
   // shared obstacle keeps it.
-  SimWorld world(kWorld, kWorld);
-  walls(world);
+  SimWorld world = walledWorld();
   block(world);
-  const std::vector<std::uint8_t> costs = staticMap();
-  SharingCore core(grid(), defaults());
-  core.setStaticMap(costs.data(), costs.size());
+  SharingCore core = makeCore();
   const std::vector<std::uint32_t> face = shareBlock(core, world);
   ASSERT_FALSE(face.empty());
   for (int i = 0; i < 5; ++i)

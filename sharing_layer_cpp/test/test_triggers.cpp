@@ -10,60 +10,10 @@
 #include "sim_scan.h"
 
 using namespace sharing_layer;
-using sharing_layer::test::SimWorld;
+using namespace sharing_layer::test;
 
 namespace
 {
-constexpr double kWorld = 10.0;
-
-GridGeometry grid()
-{
-  return GridGeometry(0.05, 0.0, 0.0, 200, 200);
-}
-
-LayerParams defaults()
-{
-  LayerParams p;
-  p.robot_name = "robot_0";
-  return p;
-}
-
-/// Outer walls, on the static map too.
-SimWorld walledWorld()
-{
-  SimWorld world(kWorld, kWorld);
-  world.box(0.0, 0.0, kWorld, 0.2);
-  world.box(0.0, kWorld - 0.2, kWorld, kWorld);
-  world.box(0.0, 0.0, 0.2, kWorld);
-  world.box(kWorld - 0.2, 0.0, kWorld, kWorld);
-  return world;
-}
-
-std::vector<std::uint8_t> staticMap()
-{
-  const GridGeometry g = grid();
-  std::vector<std::uint8_t> costs(g.cellCount(), FREE_SPACE);
-  for (unsigned int y = 0; y < g.size_y; ++y)
-  {
-    for (unsigned int x = 0; x < g.size_x; ++x)
-    {
-      if (x < 4 || y < 4 || x >= g.size_x - 4 || y >= g.size_y - 4)
-      {
-        costs[g.getIndex(x, y)] = LETHAL_OBSTACLE;
-      }
-    }
-  }
-  return costs;
-}
-
-SharingCore makeCore(const LayerParams& p = defaults())
-{
-  SharingCore core(grid(), p);
-  const std::vector<std::uint8_t> costs = staticMap();
-  core.setStaticMap(costs.data(), costs.size());
-  return core;
-}
-
 /// Cells of a proposal list, all together, sorted.
 std::vector<std::uint32_t> allCells(const std::vector<Proposal>& proposals)
 {
