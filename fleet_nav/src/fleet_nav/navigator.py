@@ -153,7 +153,7 @@ class Navigator:
         self.last_oscillation_reset = now
         self.oscillation_pose = None
         self.next_plan = now
-        self.rotation = None         # a running rotate_recovery: (start yaw, turned so far, last yaw)
+        self.rotation = None         # a running rotate_recovery: (turned so far, last yaw)
         self.local_failures = 0      # failed computeVelocityCommands for this goal
 
     # --- goals --------------------------------------------------------------------------------
@@ -197,13 +197,13 @@ class Navigator:
         self._set_path(path)
         return True, ""
 
-    def _make_plan(self, costs, start, goal, window=None):
+    def _make_plan(self, costs, start, goal):
         """A* with the clearance margin, else without it."""
         if self.margin_planner is not None:
-            status, path = self.margin_planner.make_plan(costs, start, goal, window)
+            status, path = self.margin_planner.make_plan(costs, start, goal)
             if status == nav.PlanStatus.OK:
                 return status, path
-        return self.planner.make_plan(costs, start, goal, window)
+        return self.planner.make_plan(costs, start, goal)
 
     def _set_path(self, path):
         self.path = path
@@ -375,7 +375,7 @@ class Navigator:
                      cleared, behaviour.reset_distance, behaviour.reset_distance, pose[0], pose[1])
             self._recovered(now)
         else:
-            self.rotation = (pose[2], 0.0, pose[2])
+            self.rotation = (0.0, pose[2])
             if not self._rotate(step, pose):
                 self._recovered(now)
 
@@ -390,9 +390,9 @@ class Navigator:
 
     def _rotate(self, step, pose):
         """rotate_recovery: a full turn in place; False when done or when turning would collide."""
-        start, turned, last = self.rotation
+        turned, last = self.rotation
         turned += abs(_wrap(pose[2] - last))
-        self.rotation = (start, turned, pose[2])
+        self.rotation = (turned, pose[2])
         left = 2.0 * math.pi - turned
         if left <= self.params.yaw_goal_tolerance:
             return False
