@@ -25,12 +25,13 @@ SHARING_KEYS = ("static_tolerance", "proposal_strategy", "trigger_debounce", "cl
                 "trigger_radius", "memory_on_stuck_feedback")
 
 
-def _flatten(tree, prefix=""):
+def flatten(tree, prefix=""):
+    """A nested parameter tree as {"global_costmap/obstacle_range": value, ...}."""
     out = {}
     for key, value in (tree or {}).items():
         name = prefix + str(key)
         if isinstance(value, dict):
-            out.update(_flatten(value, name + "/"))
+            out.update(flatten(value, name + "/"))
         else:
             out[name] = value
     return out
@@ -189,7 +190,7 @@ class NavParams:
 
         Returns (params, unused): unused is the sorted list of keys present but not read.
         """
-        flat = _flatten(tree)
+        flat = flatten(tree)
         used = set()
 
         def take(keys, default):
