@@ -169,16 +169,18 @@ class _Robot:
         replay.emit("plan", self.name, poses=int(self.core.plan_length), dropped=int(len(xy) - self.core.plan_length))
 
     def _pose(self, stamp, sensor_xy):
-        """The robot's base in the global frame at stamp, else the laser's position (counted)."""
-        replay = self.replay
+        """(x, y, error): the robot's base in the global frame at stamp, or the laser's position and
+        why the base had none (counted by the caller only when it proposes from there)."""
         try:
-            tr = replay.chain.lookup(replay.settings.global_frame, self.base_frame, stamp)
-            return tr[0], tr[1]
+            tr = self.replay.chain.lookup(self.replay.settings.global_frame, self.base_frame, stamp)
+            return tr[0], tr[1], None
         except TransformError as err:
-            replay.count("proposals_at_sensor_pose")
-            replay.note("proposals_at_sensor_pose", "%s: no pose of %s (%s); using the laser's position instead"
-                        % (self.name, self.base_frame, err))
-            return sensor_xy
+            return sensor_xy[0], sensor_xy[1], err
+
+    def _count_sensor_pose(self, err):
+        self.replay.count("proposals_at_sensor_pose")
+        self.replay.note("proposals_at_sensor_pose", "%s: no pose of %s (%s); proposing around the laser instead"
+                         % (self.name, self.base_frame, err))
 
     def _scan(self, msg):
         replay = self.replay
@@ -211,18 +213,23 @@ class _Robot:
             replay.count("scans_origin_off_map")
         for update in outcome.updates:
             self.handler.on_internal_update(replay.to_obstacle(update, self.handler_geometry, s.global_frame))
+        if self.stuck_pending is None and not self.core.plan_length:
+            return
+        rx, ry, no_pose = self._pose(stamp, (sx, sy))   # one lookup per scan, for both triggers
         if self.stuck_pending is not None:
             trigger_time, self.stuck_pending = self.stuck_pending, None
             if self.core.signal_stuck(trigger_time):
-                rx, ry = self._pose(stamp, (sx, sy))
+                if no_pose is not None:
+                    self._count_sensor_pose(no_pose)
                 self._propose(self.core.propose(rx, ry), rx, ry)
         if self.core.plan_length:
-            rx, ry = self._pose(stamp, (sx, sy))
             report = self.core.check_plan(rx, ry, stamp)
             if report.reason != "none":
                 if report.log:
                     replay.emit("plan_trigger", self.name, reason=report.reason,
                                 message=report.message)
+                if report.proposals and no_pose is not None:
+                    self._count_sensor_pose(no_pose)
                 self._propose(report.proposals, rx, ry)
 
     def _propose(self, proposals, rx, ry):
