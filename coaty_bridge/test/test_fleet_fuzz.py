@@ -106,8 +106,11 @@ class Fleet:
         self.observer.publish(topic, payload)
 
     def assert_alive(self, after):
-        """A fresh valid obstacle from the outside peer reaches both handlers' lists."""
-        update = peer_update(rectangle=(1.0, 1.0, 1.5, 1.5))
+        """A fresh valid obstacle from the outside peer reaches both handlers' lists. Each lies
+        0.7 m from the previous one, beyond merge_distance, so it is held under its own uuid."""
+        self.alive_count = getattr(self, "alive_count", 0) + 1
+        x = -4.5 + 0.8 * ((self.alive_count - 1) % 12)
+        update = peer_update(rectangle=(x, -2.4, x + 0.1, -2.1))
         self.publish(adv_topic(), adv_payload(codec.obstacle_to_object(update, OT)))
         for robot in ROBOTS:
             self.wait_list(robot, lambda uuids: update.uuid in uuids,
@@ -145,13 +148,14 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     fleet.assert_alive("stale deadlines")
 
     # duplicate uuid: the same message 30 times, the same uuid under other sources and versions
-    dup = peer_update(rectangle=(2.0, 0.0, 2.5, 0.5))
+    # obstacles of different uuids lie more than merge_distance (0.5 m) apart, or they would merge
+    dup = peer_update(rectangle=(1.0, 0.0, 1.5, 0.5))
     for _ in range(30):
         fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(dup, OT)))
     for version, source in ((1, "peer_b"), (5, "peer_c"), (3, "peer_js")):
         fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(
             peer_update(uuid=dup.uuid, version=version, source=source, marked=(2110,),
-                        rectangle=(2.0, 0.0, 2.5, 0.5)), OT)))
+                        rectangle=(1.0, 0.0, 1.5, 0.5)), OT)))
     for robot in ROBOTS:
         fleet.wait_list(robot, lambda uuids: dup.uuid in uuids, "%s holds the duplicated obstacle" % robot)
     fleet.assert_alive("duplicate uuids")
@@ -177,7 +181,7 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     echo = peer_update(source="robot_0", rectangle=(4.0, 0.0, 4.5, 0.5))
     fleet.publish(adv_topic(IDS["robot_0"]), adv_payload(codec.obstacle_to_object(echo, OT)))
     fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(
-        peer_update(source="robot_1", rectangle=(4.0, 1.0, 4.5, 1.5)), OT)))
+        peer_update(source="robot_1", rectangle=(4.5, 1.0, 4.9, 1.4)), OT)))
     fleet.assert_alive("own-sourceId echoes")
 
     # Discover flood: 300 obstacle Discovers (each answered with every obstacle), some malformed
@@ -188,8 +192,8 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
 
     # the stamp repro of issue 15: 100, 2^32, 300 -> 100 and 300 arrive everywhere
     stamped = {}
-    for stamp in (100.0, float(2 ** 32), 300.0):
-        obj = codec.obstacle_to_object(peer_update(rectangle=(0.0, 1.5, 0.5, 2.0)), OT)
+    for offset, stamp in ((0.0, 100.0), (1.2, float(2 ** 32)), (2.4, 300.0)):
+        obj = codec.obstacle_to_object(peer_update(rectangle=(offset, 1.5, offset + 0.5, 2.0)), OT)
         obj["stamp"] = stamp
         stamped[stamp] = obj["uuid"]
         fleet.publish(adv_topic(), raw_json(obj))
@@ -204,7 +208,7 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     assert not reply["success"] and "not inside the grid" in reply["message"], reply
     reply = fleet.command({"cmd": "add", "robot": "robot_0", "rect": [-5.0, -2.5, 5.0, 2.5]})
     assert not reply["success"] and "max_obstacle_extent" in reply["message"], reply
-    reply = fleet.command({"cmd": "add", "robot": "robot_0", "rect": [-4.0, -2.0, -3.5, -1.5]})
+    reply = fleet.command({"cmd": "add", "robot": "robot_0", "rect": [-4.0, 1.0, -3.5, 1.5]})
     assert reply["success"], reply
     fleet.wait_list("robot_1", lambda uuids: reply["uuid"] in uuids, "robot_0's manual obstacle on robot_1")
     fleet.assert_alive("whole-map AddObstacle")

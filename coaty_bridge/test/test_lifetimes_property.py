@@ -4,11 +4,13 @@ delays, outages and restarts.
 Three robots, each the real pure SharingHandler plus the real CoatyBridgeClient, share one fake
 clock; the clients' MQTT transport is replaced by an in-memory network (QoS 0: a message is
 delivered within MAX_TRANSIT or never). robot_0 shares one obstacle with a deadline of D s, so
-the original expires at T0 + D. Random steps: time passes, robot_0 updates it, a robot loses its
+the original expires at T0 + D; each update by robot_0 marks a cell, an observation that renews
+the lease (issue 12), so the original then expires D s after it. Random steps: time passes,
+robot_0 updates it, a robot loses its
 broker for a while (its updates wait in the offline queue), a robot restarts (empty handler, new
 agent, Discover -> Resolves made from its peers' lists), Discovers are answered from lists of
 any age. After every step, every robot that holds the obstacle must expire it no later than
-T0 + D + 1 s.
+the original's lease + 1 s.
 """
 import os
 import sys
@@ -166,10 +168,13 @@ def test_no_copy_outlives_the_original_by_more_than_a_second(steps, first_wait):
         elif step == "deliver":
             network.deliver(clock, arg)
         elif step == "update" and uuid in robots[0].handler:
-            robots[0].handler.on_internal_update(Obstacle(
+            sent = robots[0].handler.on_internal_update(Obstacle(
                 uuid=uuid, marked=(2105 + len(steps),), cleared=(), deadline=DURATION,
                 rectangle=Rectangle(0.0, 0.0, 0.5, 0.5), source="robot_0", geometry=GRID, version=1,
                 frame_id="", stamp=clock.now))
+            if sent is not None:  # a renewal: the original lives DURATION from now
+                assert sent.deadline == DURATION
+                original_expiry = clock.now + DURATION
         elif step == "outage":
             robots[arg].disconnect()
         elif step == "heal" and not robots[arg].client.connected:

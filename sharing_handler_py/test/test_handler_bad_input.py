@@ -154,6 +154,9 @@ def test_internal_update_with_bad_grid_is_dropped_and_not_sent():
     (dict(max_cells_per_message=0), "~max_cells_per_message = 0"),
     (dict(max_cells_per_message=True), "~max_cells_per_message = True"),
     (dict(snapshot_file=None), "~snapshot_file = None"),
+    (dict(merge_distance=-0.1), "~merge_distance = -0.1"),
+    (dict(merge_distance=float("inf")), "~merge_distance = inf"),
+    (dict(merge_distance="0.5"), "~merge_distance = '0.5'"),
 ])
 def test_bad_parameters_fail_naming_parameter_and_value(changes, name):
     fields = dict(robot_name="robot_0")
@@ -165,5 +168,5 @@ def test_bad_parameters_fail_naming_parameter_and_value(changes, name):
 
 def test_parameter_defaults():
     p = HandlerParams(robot_name="robot_0")
-    assert (p.obstacle_duration, p.expiry_rate, p.snapshot_file, p.max_cells_per_message, p.map_topic) \
-        == (60.0, 1.0, "", 100000, "/map")
+    assert (p.obstacle_duration, p.expiry_rate, p.snapshot_file, p.max_cells_per_message, p.map_topic,
+            p.merge_distance) == (60.0, 1.0, "", 100000, "/map", 0.5)

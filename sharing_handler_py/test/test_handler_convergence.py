@@ -1,5 +1,8 @@
 """Convergence: the same updates, in any order and with duplicates, give every handler the same
-obstacles and cells (DESIGN.md §6). Property tests over random interleavings (hypothesis)."""
+obstacles and cells (DESIGN.md §6), merged obstacles and leases included (issue 12). With loss,
+a handler's state is a function of the set of messages it made and received, whatever their
+order. Property tests over random interleavings (hypothesis), each over 500 examples."""
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -12,17 +15,22 @@ CELLS = st.lists(st.integers(0, 15), max_size=6)
 # (marked, cleared) of one message: never both empty (a message without cells carries nothing and
 # is refused on the fleet channel, see test_handler_bad_input).
 CHANGES = st.tuples(CELLS, CELLS).filter(lambda mc: mc[0] or mc[1])
-RECTANGLES = [rect(0, 0, 1, 1), rect(0.5, 0.5, 1.5, 1.5), rect(3, 3, 4, 4)]
+# Overlapping, within merge_distance (0.5 m) of the first, chained through the second, and apart;
+# then an L of two bars and a box in its corner that only the union of the bars reaches.
+RECTANGLES = [rect(0, 0, 1, 1), rect(0.5, 0.5, 1.5, 1.5), rect(1.9, 0, 2.5, 1), rect(3.2, 3, 4, 4),
+              rect(6, 2, 7, 3), rect(-4, -4, -3.8, -2), rect(-3.5, -4, -2, -3.8), rect(-2.5, -2.5, -2, -2)]
+MERGE = 0.5
+
 
 
 @st.composite
 def fleet_messages(draw):
-    """Messages about up to three uuids from up to four robots, with clashing stamps and
-    different metadata, as a fleet could produce them."""
+    """Messages about up to four uuids from up to four robots, with clashing stamps, different
+    metadata and rectangles that overlap, touch within merge_distance or lie apart."""
     msgs = []
     for _ in range(draw(st.integers(1, 12))):
         marked, cleared = draw(CHANGES)
-        msgs.append(update(uuid=draw(st.sampled_from([U("u1"), U("u2"), U("u3")])), marked=marked,
+        msgs.append(update(uuid=draw(st.sampled_from([U("u1"), U("u2"), U("u3"), U("u4")])), marked=marked,
                            cleared=cleared, version=draw(st.integers(1, 4)),
                            source=draw(st.sampled_from(["robot_1", "robot_2", "robot_3", "robot_4"])),
                            deadline=draw(st.sampled_from([30, 60])),
@@ -30,10 +38,52 @@ def fleet_messages(draw):
     return msgs
 
 
+def merged_groups(msgs):
+    """Oracle, independent of the handler: the uuids that end as one obstacle. Each uuid's
+    rectangle is the union of its messages' rectangles; groups whose union rectangles overlap
+    or lie within MERGE join, until none do."""
+    groups = {}
+    for m in msgs:
+        groups.setdefault(frozenset([m.uuid]), []).append(m.rectangle)
+    boxes = {g: _union(rs) for g, rs in groups.items()}
+    joined = True
+    while joined:
+        joined = False
+        for a in sorted(boxes, key=sorted):
+            for b in sorted(boxes, key=sorted):
+                if a != b and (boxes[a].overlaps(boxes[b]) or boxes[a].gap(boxes[b]) <= MERGE):
+                    boxes[a | b] = boxes.pop(a).union(boxes.pop(b))
+                    joined = True
+                    break
+            if joined:
+                break
+    return boxes
+
+
+def _union(rectangles):
+    out = rectangles[0]
+    for r in rectangles[1:]:
+        out = out.union(r)
+    return out
+
+
+def expected_cells(msgs, group):
+    """Oracle: per cell, the greatest (version, source, cleared) over every message of the group."""
+    best = {}
+    for m in msgs:
+        if m.uuid in group:
+            for cells, absent in ((m.marked, False), (m.cleared, True)):
+                for c in cells:
+                    key = (m.version, m.source, absent)
+                    if c not in best or key > best[c]:
+                        best[c] = key
+    return tuple(sorted(c for c, key in best.items() if not key[2]))
+
+
 @EXAMPLES
 @given(msgs=fleet_messages(), data=st.data())
 def test_observers_converge_whatever_the_order_and_duplicates(msgs, data):
-    observers = [Recorder("observer_%d" % i) for i in range(3)]
+    observers = [Recorder("observer_%d" % i, merge_distance=MERGE) for i in range(3)]
     for r in observers:
         order = data.draw(st.permutations(msgs))
         dups = data.draw(st.lists(st.sampled_from(msgs), max_size=4))
@@ -44,33 +94,72 @@ def test_observers_converge_whatever_the_order_and_duplicates(msgs, data):
     reference = state(observers[0].handler)
     for r in observers[1:]:
         assert state(r.handler) == reference
-    assert [u for u, *_ in reference] == sorted({m.uuid for m in msgs})
+    # the merged obstacles are the oracle's: survivor = smallest uuid, union rectangle, cells
+    groups = merged_groups(msgs)
+    expected = sorted((min(g), box, expected_cells(msgs, g)) for g, box in groups.items())
+    assert [(h.uuid, h.rectangle, h.cells) for h in observers[0].handler.obstacles()] == expected
+    for r in observers:
+        for g in groups:
+            assert {r.handler.resolve(u) for u in g} == {min(g)}
+
+
+@EXAMPLES
+@given(msgs=fleet_messages(), data=st.data())
+def test_the_layer_is_told_the_same_cells_as_the_handler_holds(msgs, data):
+    """The layer learns merged obstacles from the handler's messages (expired absorbed uuid, its
+    cells re-sent under the survivor with their own stamps): replaying those by the same stamp
+    rule gives the handler's cells."""
+    r = Recorder("observer", merge_distance=MERGE)
+    for m in data.draw(st.permutations(msgs)):
+        r.handler.on_external(m)
+    layer = {}
+    for kind, item in r.events:
+        if kind == "expired":
+            layer.pop(item, None)
+        elif kind == "layer":
+            cells = layer.setdefault(item.uuid, {})
+            for c in item.marked:
+                if c not in cells or (item.version, item.source) > cells[c][0]:
+                    cells[c] = ((item.version, item.source), True)
+            for c in item.cleared:
+                if c not in cells or (item.version, item.source) >= cells[c][0]:
+                    cells[c] = ((item.version, item.source), False)
+    assert sorted((u, tuple(sorted(c for c, (_, p) in cells.items() if p))) for u, cells in layer.items()) \
+        == [(h.uuid, h.cells) for h in r.handler.obstacles()]
 
 
 @EXAMPLES
 @given(data=st.data())
-def test_robots_proposing_updating_and_exchanging_in_any_interleaving_converge(data):
-    """Robots propose (sometimes the same obstacle at once), update what they hold, and their
-    messages reach every other robot in any order, some twice. At the end every robot holds
-    the same obstacles and cells, and no authorised obstacle is lost."""
+def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_what_was_lost(data):
+    """Robots propose (sometimes the same obstacle at once, or one touching another), update
+    what they hold, and their messages reach the other robots in any order, some twice, some
+    never. Every robot's state is a function of the set of messages it made and received,
+    whatever the order; when nothing was lost every robot holds the same obstacles and cells,
+    and no authorised obstacle is lost (it is held, or merged into one that is)."""
     n = data.draw(st.integers(2, 3), label="robots")
-    robots = [Recorder("robot_%d" % i, uuids="r%d" % i) for i in range(n)]
+    robots = [Recorder("robot_%d" % i, uuids="r%d" % i, merge_distance=MERGE) for i in range(n)]
     sent_count = [0] * n
     pending, delivered, authorised = [], [], set()
+    received = [[] for _ in range(n)]
+    lost = False
 
     def ship(i):
         for m in robots[i].fleet[sent_count[i]:]:
             pending.extend((m, j) for j in range(n) if j != i)
         sent_count[i] = len(robots[i].fleet)
 
-    for _ in range(data.draw(st.integers(1, 14), label="steps")):
-        kind = data.draw(st.sampled_from(["propose", "update", "deliver", "deliver", "duplicate"]))
+    def deliver(m, j):
+        robots[j].handler.on_external(m)
+        received[j].append(m)
+
+    for _ in range(data.draw(st.integers(1, 16), label="steps")):
+        kind = data.draw(st.sampled_from(["propose", "update", "deliver", "deliver", "duplicate", "lose"]))
         i = data.draw(st.integers(0, n - 1))
         h = robots[i].handler
         if kind == "propose":
             shared = h.on_proposal(proposal(cells=data.draw(CELLS.filter(bool)), source="robot_%d" % i,
                                             rectangle=data.draw(st.sampled_from(RECTANGLES))))
-            if shared is not None:
+            if shared is not None and shared.version == 1:
                 authorised.add(shared.uuid)
         elif kind == "update" and len(h):
             held = data.draw(st.sampled_from(h.obstacles()))
@@ -82,53 +171,98 @@ def test_robots_proposing_updating_and_exchanging_in_any_interleaving_converge(d
                                         deadline=held.deadline, rectangle=held.rectangle))
         elif kind == "deliver" and pending:
             m, j = pending.pop(data.draw(st.integers(0, len(pending) - 1)))
-            robots[j].handler.on_external(m)
+            deliver(m, j)
             delivered.append((m, j))
         elif kind == "duplicate" and delivered:
-            m, j = data.draw(st.sampled_from(delivered))
-            robots[j].handler.on_external(m)
+            deliver(*data.draw(st.sampled_from(delivered)))
+        elif kind == "lose" and pending:
+            pending.pop(data.draw(st.integers(0, len(pending) - 1)))
+            lost = True
         ship(i)
 
     for m, j in data.draw(st.permutations(pending), label="final delivery"):
-        robots[j].handler.on_external(m)
+        deliver(m, j)
     for m, j in data.draw(st.lists(st.sampled_from(delivered), max_size=3) if delivered
                           else st.just([]), label="late duplicates"):
-        robots[j].handler.on_external(m)
+        deliver(m, j)
 
-    reference = state(robots[0].handler)
-    for r in robots[1:]:
-        assert state(r.handler) == reference
-    assert {u for u, *_ in reference} == authorised
-    for r in robots:
+    for i, r in enumerate(robots):
+        # state = f(set): a fresh observer fed the same messages in a fixed order agrees
+        observer = Recorder("observer", merge_distance=MERGE)
+        for m in sorted(set(r.fleet) | set(received[i]), key=lambda m: (m.uuid, m.version, m.source,
+                                                                          m.marked, m.cleared)):
+            observer.handler.on_external(m)
+        assert state(observer.handler) == state(r.handler)
         assert sum(v for k, v in r.handler.counters.items() if k.startswith("dropped_")) == 0
+    if not lost:
+        reference = state(robots[0].handler)
+        for r in robots[1:]:
+            assert state(r.handler) == reference
+        for r in robots:
+            assert {r.handler.resolve(u) for u in authorised} == {u for u, *_ in reference}
 
 
 @EXAMPLES
 @given(first=st.permutations([0, 1, 2]), order=st.data())
-def test_simultaneous_proposals_of_one_obstacle_are_both_kept_on_every_robot(first, order):
+def test_simultaneous_proposals_of_one_obstacle_end_as_one_obstacle_on_every_robot(first, order):
     """Two robots propose the same obstacle before hearing of each other: each authorises its
-    own uuid, and every robot, whatever the delivery order, ends holding both."""
+    own uuid; every robot, whatever the delivery order, ends holding one obstacle, the smaller
+    uuid, with the cells of both, living as long as the later lease."""
     robots = [Recorder("robot_%d" % i, uuids="r%d" % i) for i in range(3)]
     a = robots[0].handler.on_proposal(proposal(cells=(1, 2, 3), source="robot_0"))
     b = robots[1].handler.on_proposal(proposal(cells=(2, 3, 4), source="robot_1"))
     msgs = [(a, 1), (a, 2), (b, 0), (b, 2)]
     for m, j in order.draw(st.permutations(msgs)):
         robots[j].handler.on_external(m)
-    expected = sorted([(a.uuid, "robot_0", (1, 2, 3)), (b.uuid, "robot_1", (2, 3, 4))])
+    survivor = min(a.uuid, b.uuid)
     for r in robots:
-        assert [(h.uuid, h.source, h.cells) for h in r.handler.obstacles()] == expected
-    # and each expires on its own deadline, counted from its local arrival
+        assert [(h.uuid, h.source, h.cells) for h in r.handler.obstacles()] == [(survivor, "robot_0", (1, 2, 3, 4))]
+        assert r.handler.resolve(a.uuid) == r.handler.resolve(b.uuid) == survivor
     for r in robots:
-        r.clock.now += 60
-        assert r.handler.expire() == sorted([a.uuid, b.uuid])
+        r.clock.now += 59.9
+        assert r.handler.expire() == []
+        r.clock.now += 0.1
+        assert r.handler.expire() == [survivor]
         assert len(r.handler) == 0
+        assert r.handler.is_tombstoned(a.uuid) and r.handler.is_tombstoned(b.uuid)
 
 
-def test_after_hearing_of_an_obstacle_a_robot_no_longer_proposes_it():
-    """The other order of the race: the share arrives first, so the second proposal is redundant
-    and the fleet ends with one obstacle."""
+def test_after_hearing_of_an_obstacle_a_robot_updates_it_instead_of_proposing_a_new_one():
+    """The other order of the race: the share arrives first, so the second proposal becomes an
+    update of it and the fleet ends with one obstacle."""
     r0, r1 = Recorder("robot_0", uuids="r0"), Recorder("robot_1", uuids="r1")
     a = r0.handler.on_proposal(proposal(cells=(1, 2), source="robot_0"))
     r1.handler.on_external(a)
-    assert r1.handler.on_proposal(proposal(cells=(2, 3), source="robot_1")) is None
+    merged = r1.handler.on_proposal(proposal(cells=(2, 3), source="robot_1"))
+    assert merged.uuid == a.uuid and merged.version == 2
+    r0.handler.on_external(merged)
     assert state(r0.handler) == state(r1.handler)
+    assert r0.handler.get(a.uuid).cells == (1, 2, 3)
+
+
+LEASE_DEADLINES = st.sampled_from([5, 30, 60])
+
+
+@EXAMPLES
+@given(data=st.data())
+def test_leases_the_greatest_arrival_plus_deadline_wins_whatever_the_order(data):
+    """Concurrent renewals and stale copies, of one obstacle or of obstacles that merge, arrive at
+    random times in random order, some twice: each robot expires the (merged) obstacle at the
+    greatest arrival + deadline of any message it got for it, no earlier, no later."""
+    msgs = data.draw(st.lists(st.tuples(st.sampled_from([U("u1"), U("u2")]), LEASE_DEADLINES,
+                                        st.sampled_from(RECTANGLES[:3]), st.integers(1, 4)),
+                              min_size=1, max_size=8), label="messages")
+    obstacles = [update(uuid, marked=(v,), version=v, source="robot_%d" % v, deadline=d, rectangle=rc)
+                 for uuid, d, rc, v in msgs]
+    r = Recorder("observer", merge_distance=MERGE)
+    latest = {}
+    for m in data.draw(st.permutations(obstacles + data.draw(st.lists(st.sampled_from(obstacles), max_size=3)))):
+        r.clock.now += data.draw(st.sampled_from([0.0, 0.25, 3.0, 10.0]))
+        if r.handler.on_external(m):
+            latest[r.handler.resolve(m.uuid)] = max(latest.get(r.handler.resolve(m.uuid), 0.0), r.clock.now + m.deadline)
+        # a message for an obstacle that expired here is dropped; nothing else is
+        r.handler.expire()
+    for h in r.handler.obstacles():
+        # merged groups: the leases of everything absorbed count too
+        expiry = max(t for u, t in latest.items() if r.handler.resolve(u) == h.uuid)
+        assert h.remaining == pytest.approx(expiry - r.clock.now)

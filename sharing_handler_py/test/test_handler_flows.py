@@ -31,23 +31,44 @@ def test_fractional_duration_rounds_up_to_whole_seconds():
     assert r.handler.on_proposal(proposal()).deadline == 3
 
 
-def test_overlapping_proposal_is_not_new_and_dropped_with_a_debug_line(caplog):
-    r = Recorder()
-    first = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 2, 2)))
-    with caplog.at_level(logging.DEBUG, logger="sharing_handler_py"):
-        assert r.handler.on_proposal(proposal(rectangle=rect(1, 1, 3, 3))) is None
-    assert len(r.fleet) == 1 and len(r.layer) == 1
-    assert r.handler.counters["redundant"] == 1
-    lines = [rec for rec in caplog.records if "not new" in rec.getMessage()]
-    assert len(lines) == 1 and lines[0].levelno == logging.DEBUG
-    assert first.uuid in lines[0].getMessage()
+def test_overlapping_proposal_becomes_an_update_of_the_live_obstacle(caplog):
+    """Issue 12, failure 4: a second trigger proposed a rectangle touching the first obstacle and
+    it was authorised as a new one. Now it is an observation of that obstacle: an update with
+    its uuid, the proposal's cells, the union rectangle and a renewed lease, sent to the fleet
+    and to the layer (which does not know its proposal became an update)."""
+    r = Recorder(duration=60)
+    first = r.handler.on_proposal(proposal(cells=(1, 2), rectangle=rect(0, 0, 2, 2)))
+    r.clock.now += 20
+    with caplog.at_level(logging.INFO, logger="sharing_handler_py"):
+        merged = r.handler.on_proposal(proposal(cells=(2, 3), rectangle=rect(1, 1, 3, 3)))
+    assert (merged.uuid, merged.version, merged.source) == (first.uuid, 2, "robot_0")
+    assert (merged.marked, merged.cleared, merged.deadline) == ((2, 3), (), 60)
+    assert merged.rectangle == rect(0, 0, 3, 3)
+    assert r.fleet == [first, merged] and r.layer == [first, merged]
+    held = r.handler.get(first.uuid)
+    assert (held.cells, held.rectangle, held.remaining) == ((1, 2, 3), rect(0, 0, 3, 3), 60)
+    assert len(r.handler) == 1
+    assert r.handler.counters["merged_proposals"] == 1 and r.handler.counters["authorised"] == 1
+    lines = [rec.getMessage() for rec in caplog.records if "merge_distance" in rec.getMessage()]
+    assert len(lines) == 1 and first.uuid in lines[0]
 
 
-def test_proposal_overlapping_an_external_obstacle_is_redundant_too():
+def test_proposal_near_an_external_obstacle_updates_it():
     r = Recorder()
-    r.handler.on_external(update(U("ext-1"), marked=(5,), version=1, rectangle=rect(0, 0, 2, 2)))
-    assert r.handler.on_proposal(proposal(rectangle=rect(1.5, 1.5, 4, 4))) is None
-    assert r.handler.counters["redundant"] == 1
+    r.handler.on_external(update(U("ext-1"), marked=(5,), version=3, rectangle=rect(0, 0, 2, 2)))
+    merged = r.handler.on_proposal(proposal(cells=(7,), rectangle=rect(2.3, 0, 4, 1)))
+    assert (merged.uuid, merged.version) == (U("ext-1"), 4)
+    assert r.handler.get(U("ext-1")).cells == (5, 7)
+
+
+def test_a_proposal_beyond_merge_distance_is_a_new_obstacle():
+    r = Recorder(merge_distance=0.5)
+    first = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    assert r.handler.on_proposal(proposal(rectangle=rect(1.6, 0, 2, 1))).uuid != first.uuid
+    assert len(r.handler) == 2
+    assert r.handler.on_proposal(proposal(rectangle=rect(1, 1.5, 2, 2))).uuid == first.uuid, \
+        "0.5 m from both: it joins them into one"
+    assert len(r.handler) == 1 and r.handler.counters["merged_obstacles"] == 1
 
 
 def test_touching_rectangles_do_not_overlap_but_a_degenerate_one_inside_does():
@@ -55,9 +76,9 @@ def test_touching_rectangles_do_not_overlap_but_a_degenerate_one_inside_does():
     assert rect(0, 0, 1, 1).overlaps(rect(0.5, 0.5, 0.5, 0.5))
     assert rect(0, 0, 1, 1).overlaps(rect(1, 0.5, 1, 0.5))
     assert not rect(0, 0, 1, 1).overlaps(rect(1.01, 0.5, 1.01, 0.5))
-    r = Recorder()
-    r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
-    assert r.handler.on_proposal(proposal(rectangle=rect(1, 0, 2, 1))) is not None
+    assert rect(0, 0, 1, 1).gap(rect(1, 0, 2, 1)) == 0.0
+    assert rect(0, 0, 1, 1).gap(rect(1.5, 3, 2, 4)) == pytest.approx(2.0)
+    assert rect(0, 0, 1, 1).union(rect(1.5, 3, 2, 4)) == rect(0, 0, 2, 4)
 
 
 def test_first_proposal_sets_the_grid_when_no_map_has_arrived():
@@ -98,37 +119,48 @@ def test_internal_update_with_a_stale_version_is_restamped_above_the_max_seen(ca
     assert any("re-stamped 8" in rec.getMessage() for rec in caplog.records)
 
 
-def test_internal_update_keeps_the_first_rectangle_and_deadline():
+def test_internal_update_sends_the_grown_rectangle_and_renews_the_lease_when_it_marks():
     r = Recorder(duration=60)
     shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    r.clock.now += 40
     sent = r.handler.on_internal_update(update(shared.uuid, marked=(1,), version=2, source="robot_0",
                                                deadline=0, rectangle=rect(0, 0, 5, 5)))
-    assert sent.rectangle == rect(0, 0, 1, 1) and sent.deadline == 60
+    assert sent.rectangle == rect(0, 0, 5, 5) and sent.deadline == 60
+    held = r.handler.get(shared.uuid)
+    assert held.rectangle == rect(0, 0, 5, 5) and held.remaining == 60
+    assert r.handler.counters["renewals"] == 1
+    r.clock.now += 59
+    assert r.handler.expire() == [], "renewed 40 s after the share: lives 60 s from then"
+    r.clock.now += 1
+    assert r.handler.expire() == [shared.uuid]
 
 
-def test_internal_update_carries_the_lifetime_left_when_it_is_sent():
+def test_internal_update_that_only_clears_carries_the_lifetime_left_when_it_is_sent():
     """A robot that missed the first share adds the obstacle from an update: it must not keep
-    it longer than the robot that shared it (issue 15, item 2)."""
+    it longer than the robot that shared it (issue 15, item 2). Only cells seen occupied renew."""
     r = Recorder(duration=60)
     shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
     r.clock.now += 25.4
-    sent = r.handler.on_internal_update(update(shared.uuid, marked=(1,), version=2, source="robot_0",
+    sent = r.handler.on_internal_update(update(shared.uuid, cleared=(10,), version=2, source="robot_0",
                                                deadline=60))
     assert sent.deadline == 34  # 34.6 s left, rounded down
+    assert r.handler.counters["renewals"] == 0
     late = Recorder("robot_1", clock=r.clock)
     late.handler.on_external(sent)
     assert late.handler.get(shared.uuid).remaining <= r.handler.get(shared.uuid).remaining
 
 
-def test_a_later_copy_can_bring_expiry_closer_but_never_push_it_back():
+def test_the_greatest_lease_wins_whatever_the_order():
     r = Recorder(duration=60)
     r.handler.on_external(update(U("a"), marked=(1,), version=1, deadline=30))   # expires at 130
     r.clock.now += 10
-    r.handler.on_external(update(U("a"), marked=(2,), version=2, deadline=50))   # would be 160
-    assert r.handler.get(U("a")).remaining == pytest.approx(20.0)
-    r.handler.on_external(update(U("a"), marked=(3,), version=3, deadline=5))    # 115: sooner
-    assert r.handler.get(U("a")).remaining == pytest.approx(5.0)
-    r.clock.now += 5
+    r.handler.on_external(update(U("a"), marked=(2,), version=2, deadline=50))   # renewed: 160
+    assert r.handler.get(U("a")).remaining == pytest.approx(50.0)
+    r.handler.on_external(update(U("a"), marked=(3,), version=3, deadline=5))    # an old copy: 115
+    assert r.handler.get(U("a")).remaining == pytest.approx(50.0)
+    r.clock.now += 49.9
+    assert r.handler.expire() == []
+    r.clock.now += 0.1
     assert r.handler.expire() == [U("a")]
 
 
@@ -177,7 +209,7 @@ def test_the_first_share_defines_rectangle_deadline_and_source_even_when_it_arri
                                  rectangle=rect(0, 0, 1, 1)))
     held = r.handler.get(U("ext-1"))
     assert (held.source, held.deadline, held.rectangle, held.version) == \
-        ("robot_1", 30, rect(0, 0, 1, 1), 3)
+        ("robot_1", 30, rect(0, 0, 9, 4.5), 3), "the rectangle is the union of all seen"
 
 
 def test_fleet_messages_wait_for_the_grid_and_are_applied_when_the_map_arrives():
@@ -192,7 +224,7 @@ def test_fleet_messages_wait_for_the_grid_and_are_applied_when_the_map_arrives()
 def test_waiting_queue_is_bounded():
     r = Recorder(geometry=None, max_deferred=2)
     for i in range(3):
-        r.handler.on_external(update(U("ext-%d" % i), marked=(1,), version=1))
+        r.handler.on_external(update(U("ext-%d" % i), marked=(1,), version=1, rectangle=rect(3 * i, 0, 3 * i + 1, 1)))
     assert r.handler.counters["dropped_no_geometry"] == 1
     r.handler.set_geometry(GRID)
     assert [h.uuid for h in r.handler.obstacles()] == [U("ext-0"), U("ext-1")]
@@ -273,7 +305,6 @@ def test_manual_add_with_cells_and_deadline():
     (dict(rectangle=[0, 0, 1, 1], deadline=2 ** 32), "deadline"),
     (dict(rectangle=[0, 0, 1]), "4"),
     (dict(rectangle=[0, 0, 1, 1], marked=(400 * 200,)), "index_out_of_range"),
-    (dict(rectangle=[-10, -5, -9, -4]), "overlaps"),
 ])
 def test_manual_add_refusals_say_why(kwargs, why):
     r = Recorder()
@@ -281,6 +312,14 @@ def test_manual_add_refusals_say_why(kwargs, why):
     with pytest.raises(InvalidRequestError, match=why):
         r.handler.add_manual(**kwargs)
     assert len(r.handler) == 1
+
+
+def test_manual_add_near_a_live_obstacle_updates_it():
+    r = Recorder()
+    shared = r.handler.on_proposal(proposal(rectangle=rect(-10, -5, -9, -4)))
+    merged = r.handler.add_manual([-9.2, -5, -8, -4])
+    assert merged.uuid == shared.uuid and merged.version == 2 and len(r.handler) == 1
+    assert r.handler.get(shared.uuid).rectangle == rect(-10, -5, -8, -4)
 
 
 def test_manual_add_is_stamped_with_the_time_it_was_made():
@@ -302,7 +341,8 @@ def test_manual_add_without_a_grid_is_refused():
 
 def test_list_holds_full_state_sorted_by_uuid_with_remaining_time():
     r = Recorder(duration=60)
-    r.handler.on_external(update(U("b"), marked=(2,), version=4, deadline=30, source="robot_2"))
+    r.handler.on_external(update(U("b"), marked=(2,), version=4, deadline=30, source="robot_2",
+                                 rectangle=rect(5, 0, 6, 1)))
     r.handler.on_external(update(U("a"), marked=(5, 1), cleared=(9,), version=1, deadline=10,
                                  source="robot_1"))
     r.clock.now += 2.5

@@ -10,7 +10,21 @@ its marked cells whose stamp is < S, then clears each of its cleared cells whose
 touched it, whatever the order the updates came in, and applying an update twice changes
 nothing. The obstacle's metadata (rectangle, deadline, first source) comes from the message
 with the smallest stamp seen for its uuid (the first share, version 1, once it has arrived),
-and its version is the greatest seen. Both are order-independent as well.
+its rectangle is the union of all rectangles seen, and its version is the greatest seen. All are
+order-independent as well.
+
+Merging (issue 12): two live obstacles whose rectangles lie within merge_distance of each other
+are one obstacle. The one with the smaller uuid absorbs the other: per cell the greater stamp
+wins, as if every update of both had been sent for the surviving uuid, and later messages for
+the absorbed uuid are applied to the survivor. Rectangles only grow, so two obstacles once
+within merge_distance stay so, and every robot ends with the same merged obstacles whatever
+the order the messages came in. A proposal within merge_distance of a live obstacle becomes an
+update of it.
+
+Leases (issue 12): a message that marks cells is an observation of the obstacle; the robot
+that made it gives it a full obstacle_duration again. A held obstacle expires at the latest
+arrival + deadline of any message for it (the greatest lease wins, whatever the order).
+Messages that only clear cells carry the lifetime left, so they never extend it.
 """
 import logging
 import math
@@ -48,7 +62,7 @@ DROP_REASONS = (
 
 #: Counters besides the drops.
 EVENT_COUNTERS = ("proposals", "authorised", "redundant", "manual", "updates_in", "updates_out",
-                  "restamped", "expired", "deferred")
+                  "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals")
 
 
 @dataclass(frozen=True)
@@ -59,7 +73,7 @@ class HeldObstacle:
     source: str            # the robot that first shared it
     version: int           # the greatest version seen
     deadline: int          # seconds, as in the message that defines the metadata (first share)
-    rectangle: Rectangle
+    rectangle: Rectangle   # union of every rectangle seen for it (and for obstacles it absorbed)
     geometry: Geometry
     frame_id: str
     cells: Tuple[int, ...]  # present cells, sorted
@@ -105,9 +119,9 @@ class _Entry:
         self.geometry = obstacle.geometry
         self.frame_id = obstacle.frame_id
         self.arrival = arrival
-        # Local expiry. Deadlines on the wire are remaining lifetimes aged to the moment of
-        # sending, so arrival + deadline is the original's expiry (plus transit); a later
-        # copy can only bring it closer, never push it back (see note_deadline).
+        # Local expiry, a lease. Deadlines on the wire are remaining lifetimes aged to the moment
+        # of sending: a renewal carries a full obstacle_duration, anything else what is left,
+        # rounded down. The greatest arrival + deadline wins (see note_deadline).
         self.expires_at = arrival + obstacle.deadline
         self.first_key = _meta_key(obstacle)
         self.max_version = obstacle.version
@@ -137,22 +151,55 @@ class _Entry:
         if obstacle.version > self.max_version:
             self.max_version = obstacle.version
             changed = True
-        if stamp <= self.first_key[:2] and _meta_key(obstacle) < self.first_key:
-            # The earliest share defines the metadata, so all robots agree on it; two messages
-            # with the same stamp (only a faulty peer sends them) are ordered by their metadata.
-            self.first_key = _meta_key(obstacle)
-            self.source = obstacle.source
-            self.rectangle = obstacle.rectangle
-            self.deadline = obstacle.deadline
-            self.frame_id = obstacle.frame_id
-            changed = True
+        changed |= self._grow(obstacle.rectangle)
+        changed |= self._take_metadata(_meta_key(obstacle), obstacle.source, obstacle.deadline,
+                                       obstacle.frame_id)
         if changed:
             self.sorted_cells = None
         return changed
 
+    def absorb(self, other):
+        """Joins another obstacle into this one (merging): per cell the greater (stamp, absent)
+        wins, which is what applying every update of both to this uuid gives; the greatest
+        version and lease, the union of the rectangles, the metadata of the earlier first share."""
+        stamps, present = self.stamps, self.present
+        for cell, stamp in other.stamps.items():
+            old = stamps.get(cell)
+            theirs = (stamp, cell not in other.present)
+            if old is None or theirs > (old, cell not in present):
+                stamps[cell] = stamp
+                if theirs[1]:
+                    present.discard(cell)
+                else:
+                    present.add(cell)
+        self.max_version = max(self.max_version, other.max_version)
+        self.expires_at = max(self.expires_at, other.expires_at)
+        self.arrival = min(self.arrival, other.arrival)
+        self._grow(other.rectangle)
+        self._take_metadata(other.first_key, other.source, other.deadline, other.frame_id)
+        self.sorted_cells = None
+
+    def _grow(self, rectangle):
+        if self.rectangle.contains(rectangle):
+            return False
+        self.rectangle = self.rectangle.union(rectangle)
+        return True
+
+    def _take_metadata(self, key, source, deadline, frame_id):
+        # The earliest share defines the metadata, so all robots agree on it; two messages
+        # with the same stamp (only a faulty peer sends them) are ordered by their metadata.
+        if key[:2] <= self.first_key[:2] and key < self.first_key:
+            self.first_key = key
+            self.source = source
+            self.deadline = deadline
+            self.frame_id = frame_id
+            return True
+        return False
+
     def note_deadline(self, now, deadline):
-        """Another message for this obstacle arrived at `now` saying `deadline` s remain."""
-        self.expires_at = min(self.expires_at, now + deadline)
+        """Another message for this obstacle arrived at `now` saying `deadline` s remain: the
+        greater lease wins."""
+        self.expires_at = max(self.expires_at, now + deadline)
 
     def cells(self):
         if self.sorted_cells is None:
@@ -181,11 +228,15 @@ class SharingHandler:
         max_cells_per_message: a message with more indexes is dropped.
         uuid_factory: callable returning a new uuid string (default: lower-case uuid4).
         max_deferred: fleet messages kept while no grid is known.
+        max_obstacle_extent: metres; a manual add with a larger rectangle is refused.
+        merge_distance: metres; obstacles (and proposals) whose rectangles lie this close are
+            one obstacle (issue 12, merging). A robot needs at least twice its inscribed radius
+            to pass between two obstacles, so a smaller gap is no passage anyway.
     """
 
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
-                 max_deferred=10000, max_obstacle_extent=10.0):
+                 max_deferred=10000, max_obstacle_extent=10.0, merge_distance=0.5):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -193,6 +244,9 @@ class SharingHandler:
             raise ValueError("obstacle_duration %r must be a positive number" % (obstacle_duration,))
         if geometry is not None and not isinstance(geometry, Geometry):
             raise ValueError("geometry %r is not a Geometry" % (geometry,))
+        if isinstance(merge_distance, bool) or not isinstance(merge_distance, (int, float)) \
+                or not math.isfinite(merge_distance) or merge_distance < 0:
+            raise ValueError("merge_distance %r must be a number >= 0 (metres)" % (merge_distance,))
         self.robot_name = robot_name
         self._clock = clock
         self._deadline = int(math.ceil(obstacle_duration))
@@ -205,7 +259,9 @@ class SharingHandler:
         self._new_uuid = uuid_factory or (lambda: str(uuidlib.uuid4()))
         self._max_deferred = max_deferred
         self._max_extent = max_obstacle_extent
+        self._merge_distance = float(merge_distance)
         self._entries = {}      # uuid -> _Entry
+        self._aliases = {}      # uuid of an absorbed obstacle -> uuid that absorbed it
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
         self._deferred = []     # fleet messages waiting for a grid
         self._counters = dict.fromkeys(EVENT_COUNTERS + tuple("dropped_" + r for r in DROP_REASONS), 0)
@@ -226,6 +282,12 @@ class SharingHandler:
 
     def __contains__(self, uuid):
         return uuid in self._entries
+
+    def resolve(self, uuid):
+        """The uuid of the held obstacle that absorbed `uuid` (itself when not absorbed)."""
+        while uuid in self._aliases:
+            uuid = self._aliases[uuid]
+        return uuid
 
     def obstacles(self):
         """The held obstacles, sorted by uuid."""
@@ -272,12 +334,9 @@ class SharingHandler:
         except InvalidMessageError as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
-        other = self._overlapping(obstacle.rectangle)
-        if other is not None:
-            self._counters["redundant"] += 1
-            _log.debug("%s: proposal %s overlaps obstacle %s %s, already monitored: not new, dropped",
-                       self.robot_name, obstacle.rectangle, other.uuid, other.rectangle)
-            return None
+        near = self._near(obstacle.rectangle)
+        if near is not None:
+            return self._merge_proposal(obstacle, near)
         return self._authorise(obstacle, self._deadline)
 
     def on_internal_update(self, obstacle):
@@ -285,6 +344,9 @@ class SharingHandler:
         Returns the Obstacle sent, or None when dropped."""
         try:
             check_uuid(obstacle.uuid)
+            if obstacle.uuid in self._aliases:
+                # the layer still knows an obstacle that was merged into another one
+                obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
             if obstacle.uuid in self._tombstones:
                 raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
             entry = self._entries.get(obstacle.uuid)
@@ -317,12 +379,19 @@ class SharingHandler:
             _log.debug("%s: internal update of %s claims source %r; set to own name",
                        self.robot_name, obstacle.uuid, obstacle.source)
             changes["source"] = self.robot_name
-        # The rectangle never changes after the first share (DESIGN.md §5.7). The deadline
-        # goes out as the lifetime left now, so a robot that missed the first share and
-        # adds the obstacle from this update does not keep it longer than we do.
-        if obstacle.rectangle != entry.rectangle:
-            changes["rectangle"] = entry.rectangle
-        left = remaining_deadline(entry.expires_at - self._clock())
+        # The rectangle only grows (merging): the layer may not know the latest union yet.
+        # Cells seen occupied renew the lease: the update carries a full obstacle_duration.
+        # Anything else goes out with the lifetime left now, so a robot that missed the first
+        # share and adds the obstacle from this update does not keep it longer than we do.
+        rectangle = entry.rectangle.union(obstacle.rectangle)
+        if obstacle.rectangle != rectangle:
+            changes["rectangle"] = rectangle
+        if obstacle.marked:
+            left = self._deadline
+            entry.note_deadline(self._clock(), left)
+            self._counters["renewals"] += 1
+        else:
+            left = remaining_deadline(entry.expires_at - self._clock())
         if obstacle.deadline != left:
             changes["deadline"] = left
         if changes:
@@ -337,6 +406,8 @@ class SharingHandler:
         self._counters["updates_out"] += 1
         if entry.apply(obstacle):
             self._on_change()
+        if obstacle.rectangle != entry.rectangle or changes.get("rectangle") is not None:
+            self._merge_around(obstacle.uuid)
         return obstacle
 
     def on_external(self, obstacle):
@@ -358,6 +429,8 @@ class SharingHandler:
         except InvalidMessageError as err:
             self.reject(obstacle.source, obstacle.uuid, err)
             return False
+        if obstacle.uuid in self._aliases:
+            obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
         entry = self._entries.get(obstacle.uuid)
         if entry is None:
             entry = _Entry(obstacle, self._clock())
@@ -374,6 +447,7 @@ class SharingHandler:
         self._to_layer(obstacle)
         if changed:
             self._on_change()
+            self._merge_around(obstacle.uuid)
         return True
 
     def add_manual(self, rectangle, marked=(), deadline=0, frame_id=""):
@@ -408,11 +482,10 @@ class SharingHandler:
             check_indexes(obstacle, self._geometry, self._max_cells)
         except InvalidMessageError as err:
             raise InvalidRequestError(str(err)) from err
-        other = self._overlapping(rectangle)
-        if other is not None:
-            raise InvalidRequestError("rectangle %s overlaps obstacle %s %s, already shared"
-                                      % (rectangle, other.uuid, other.rectangle))
         self._counters["manual"] += 1
+        near = self._near(rectangle)
+        if near is not None:
+            return self._merge_proposal(obstacle, near)
         return self._authorise(obstacle, int(deadline) or self._deadline)
 
     def expire(self):
@@ -422,9 +495,13 @@ class SharingHandler:
         gone = sorted(u for u, e in self._entries.items() if now >= e.expires_at)
         for uuid in gone:
             entry = self._entries.pop(uuid)
-            # Remember the uuid at least obstacle_duration more, so a late message cannot
-            # resurrect the obstacle on this robot only.
-            self._tombstones[uuid] = now + max(self._deadline, entry.deadline)
+            # Remember the uuid (and those it absorbed) at least obstacle_duration more, so a
+            # late message cannot resurrect the obstacle on this robot only.
+            until = now + max(self._deadline, entry.deadline)
+            self._tombstones[uuid] = until
+            for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
+                del self._aliases[alias]
+                self._tombstones[alias] = until
             self._counters["expired"] += 1
             _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
                       entry.expires_at - entry.arrival, entry.arrival)
@@ -459,12 +536,81 @@ class SharingHandler:
         self._on_change()
         return shared
 
-    def _overlapping(self, rectangle):
+    def _near(self, rectangle):
+        """The held obstacle (smallest uuid) whose rectangle overlaps `rectangle` or lies within
+        merge_distance of it, or None."""
         for uuid in sorted(self._entries):
             entry = self._entries[uuid]
-            if entry.rectangle.overlaps(rectangle):
+            if entry.rectangle.overlaps(rectangle) or entry.rectangle.gap(rectangle) <= self._merge_distance:
                 return entry
         return None
+
+    def _merge_proposal(self, proposal, entry):
+        """A proposal near a live obstacle is an observation of it: an update (marked cells, the
+        grown rectangle, a renewed lease) sent to the fleet and to our layer, which does not
+        know its proposal became an update."""
+        rectangle = entry.rectangle.union(proposal.rectangle)
+        update = proposal.replace(uuid=entry.uuid, version=entry.max_version + 1, source=self.robot_name,
+                                  deadline=self._deadline, rectangle=rectangle, cleared=(),
+                                  stamp=proposal.stamp or self._clock())
+        try:
+            check_fleet_message(update)
+        except InvalidMessageError as err:
+            self.reject(self.robot_name, entry.uuid, err)
+            return None
+        self._counters["merged_proposals"] += 1
+        self._counters["renewals"] += 1
+        _log.info("%s: proposal %s (%d cells) lies within merge_distance %g m of obstacle %s %s: "
+                  "sent as update v%d of it, rectangle now %s", self.robot_name, proposal.rectangle,
+                  len(proposal.marked), self._merge_distance, entry.uuid, entry.rectangle,
+                  update.version, rectangle)
+        entry.apply(update)
+        entry.note_deadline(self._clock(), self._deadline)
+        self._to_layer(update)
+        self._to_fleet(update)
+        self._counters["updates_out"] += 1
+        self._on_change()
+        self._merge_around(entry.uuid)
+        return update
+
+    def _merge_around(self, uuid):
+        """Restores the invariant "no two held obstacles lie within merge_distance" after the
+        rectangle of `uuid` grew or it was added: the smaller uuid absorbs the other, until
+        nothing near is left (an absorbed rectangle can reach a third obstacle)."""
+        while True:
+            entry = self._entries[uuid]
+            near = sorted(u for u, other in self._entries.items() if u != uuid and (
+                other.rectangle.overlaps(entry.rectangle)
+                or other.rectangle.gap(entry.rectangle) <= self._merge_distance))
+            if not near:
+                return uuid
+            group = sorted(near + [uuid])
+            for absorbed in group[1:]:
+                self._absorb(group[0], absorbed)
+            uuid = group[0]
+
+    def _absorb(self, survivor_uuid, absorbed_uuid):
+        survivor, absorbed = self._entries[survivor_uuid], self._entries.pop(absorbed_uuid)
+        survivor.absorb(absorbed)
+        self._aliases[absorbed_uuid] = survivor_uuid
+        self._counters["merged_obstacles"] += 1
+        _log.info("%s: obstacles %s %s and %s %s lie within merge_distance %g m: merged into %s, "
+                  "rectangle now %s", self.robot_name, survivor_uuid, survivor.rectangle, absorbed_uuid,
+                  absorbed.rectangle, self._merge_distance, survivor_uuid, survivor.rectangle)
+        # The layer holds both: it drops the absorbed one and gets its cells under the survivor's
+        # uuid, with their own stamps, so its cells stay the handler's.
+        self._expired_out(absorbed_uuid)
+        left = remaining_deadline(survivor.expires_at - self._clock())
+        by_stamp = {}
+        for cell, stamp in absorbed.stamps.items():
+            marked, cleared = by_stamp.setdefault(stamp, ([], []))
+            (marked if cell in absorbed.present else cleared).append(cell)
+        for (version, source), (marked, cleared) in sorted(by_stamp.items()):
+            self._to_layer(Obstacle(uuid=survivor_uuid, marked=tuple(sorted(marked)),
+                                    cleared=tuple(sorted(cleared)), deadline=left,
+                                    rectangle=survivor.rectangle, source=source, geometry=survivor.geometry,
+                                    version=version, frame_id=survivor.frame_id))
+        self._on_change()
 
     def _check_external(self, obstacle):
         # The same rules the bridge applies to what arrives over MQTT (neither is looser).

@@ -88,6 +88,7 @@ def read_params():
         snapshot_file=rospy.get_param("~snapshot_file", ""),
         max_cells_per_message=rospy.get_param("~max_cells_per_message", 100000),
         max_obstacle_extent=rospy.get_param("~max_obstacle_extent", 10.0),
+        merge_distance=rospy.get_param("~merge_distance", 0.5),
         map_topic=rospy.get_param("~map_topic", "/map"),
     )
 
@@ -121,7 +122,8 @@ class HandlerNode:
             on_expired=lambda u: self._pub_expired.publish(String(data=u)),
             on_change=self._publish_list,
             max_cells_per_message=params.max_cells_per_message,
-            max_obstacle_extent=params.max_obstacle_extent)
+            max_obstacle_extent=params.max_obstacle_extent,
+            merge_distance=params.merge_distance)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
@@ -130,9 +132,10 @@ class HandlerNode:
         rospy.Service("list_obstacles", ListObstacles, self._on_list)
         rospy.Service("add_obstacle", AddObstacle, self._on_add)
         self._timer = rospy.Timer(rospy.Duration(1.0 / params.expiry_rate), self._on_tick)
-        rospy.loginfo("%s: sharing handler up (obstacle_duration %g s, expiry %g Hz, map %s, "
-                      "snapshot %s)", params.robot_name, params.obstacle_duration, params.expiry_rate,
-                      params.map_topic, params.snapshot_file or "off")
+        rospy.loginfo("%s: sharing handler up (obstacle_duration %g s, merge_distance %g m, expiry %g Hz, "
+                      "map %s, snapshot %s)", params.robot_name, params.obstacle_duration,
+                      params.merge_distance, params.expiry_rate, params.map_topic,
+                      params.snapshot_file or "off")
 
     def _deliver(self, publisher, obstacle):
         try:

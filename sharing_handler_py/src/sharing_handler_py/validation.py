@@ -119,6 +119,24 @@ class Rectangle:
         return (axis(self.min_x, self.max_x, other.min_x, other.max_x)
                 and axis(self.min_y, self.max_y, other.min_y, other.max_y))
 
+    def gap(self, other):
+        """Distance between the two rectangles along the axis where they lie farthest apart
+        (0 when they touch or overlap): how wide a passage between them can be."""
+        return max(0.0, other.min_x - self.max_x, self.min_x - other.max_x,
+                   other.min_y - self.max_y, self.min_y - other.max_y)
+
+    def union(self, other):
+        """The smallest rectangle holding both; a join (commutative, associative, idempotent),
+        so a rectangle grown by unions is the same on every robot whatever the order."""
+        if self.contains(other):
+            return self
+        return Rectangle(min(self.min_x, other.min_x), min(self.min_y, other.min_y),
+                         max(self.max_x, other.max_x), max(self.max_y, other.max_y))
+
+    def contains(self, other):
+        return (self.min_x <= other.min_x and self.min_y <= other.min_y
+                and self.max_x >= other.max_x and self.max_y >= other.max_y)
+
     def __str__(self):
         return "[%g, %g, %g, %g]" % (self.min_x, self.min_y, self.max_x, self.max_y)
 
@@ -249,6 +267,7 @@ class HandlerParams:
     max_cells_per_message: int = 100000
     map_topic: str = "/map"
     max_obstacle_extent: float = 10.0  # m, longest side of a manually added obstacle
+    merge_distance: float = 0.5        # m, obstacles and proposals this close are one obstacle
 
     def __post_init__(self):
         def bad(name, why):
@@ -276,3 +295,6 @@ class HandlerParams:
         value = self.max_obstacle_extent
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e6:
             bad("max_obstacle_extent", "must be a positive number of metres below 1e6")
+        value = self.merge_distance
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < 1e6:
+            bad("merge_distance", "must be a number of metres in [0, 1e6)")
