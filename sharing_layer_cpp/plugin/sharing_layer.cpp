@@ -109,6 +109,7 @@ void SharingLayer::onInitialize()
   private_nh.param("trigger_memory", params_.trigger_memory, 30.0);
   private_nh.param("trigger_radius", params_.trigger_radius, 4.0);
   private_nh.param("memory_on_stuck_feedback", params_.memory_on_stuck_feedback, false);
+  private_nh.param("lease_renewal_interval", params_.lease_renewal_interval, 5.0);
   // The robot's inscribed radius from its footprint (onFootprintChanged) unless set here.
   inscribed_from_footprint_ = !private_nh.hasParam("inscribed_radius");
   const double footprint_inscribed = layered_costmap_->getInscribedRadius();

@@ -257,7 +257,7 @@ PYBIND11_MODULE(_sharing_core, m)
                        std::size_t max_update_cells, const std::string& robot_name, double clearing_margin,
                        unsigned int clearing_scans, double clearing_time, unsigned int clearing_neighbours,
                        double trigger_memory, double trigger_radius, double inscribed_radius,
-                       bool memory_on_stuck_feedback) {
+                       bool memory_on_stuck_feedback, double lease_renewal_interval) {
              if (static_occupied_cost < 1 || static_occupied_cost > 255)
              {
                throw py::value_error("static_occupied_cost must be 1..255, got " +
@@ -285,6 +285,7 @@ PYBIND11_MODULE(_sharing_core, m)
              p.trigger_radius = trigger_radius;
              p.inscribed_radius = inscribed_radius;
              p.memory_on_stuck_feedback = memory_on_stuck_feedback;
+             p.lease_renewal_interval = lease_renewal_interval;
              p.validate();
              return p;
            }),
@@ -296,7 +297,7 @@ PYBIND11_MODULE(_sharing_core, m)
            py::arg("robot_name") = "robot", py::arg("clearing_margin") = 0.1, py::arg("clearing_scans") = 3,
            py::arg("clearing_time") = 1.0, py::arg("clearing_neighbours") = 8, py::arg("trigger_memory") = 30.0,
            py::arg("trigger_radius") = 4.0, py::arg("inscribed_radius") = 0.25,
-           py::arg("memory_on_stuck_feedback") = false)
+           py::arg("memory_on_stuck_feedback") = false, py::arg("lease_renewal_interval") = 5.0)
       .def_property_readonly("obstacle_range", [](const LayerParams& p) { return p.limits.obstacle_range; })
       .def_property_readonly("raytrace_range", [](const LayerParams& p) { return p.limits.raytrace_range; })
       .def_readonly("static_tolerance", &LayerParams::static_tolerance)
@@ -309,7 +310,8 @@ PYBIND11_MODULE(_sharing_core, m)
       .def_readonly("trigger_memory", &LayerParams::trigger_memory)
       .def_readonly("trigger_radius", &LayerParams::trigger_radius)
       .def_readonly("inscribed_radius", &LayerParams::inscribed_radius)
-      .def_readonly("memory_on_stuck_feedback", &LayerParams::memory_on_stuck_feedback);
+      .def_readonly("memory_on_stuck_feedback", &LayerParams::memory_on_stuck_feedback)
+      .def_readonly("lease_renewal_interval", &LayerParams::lease_renewal_interval);
 
   py::class_<ObstacleUpdate>(m, "ObstacleUpdate", "Value of one sharing_msgs/SharedObstacle")
       .def(py::init([](const std::string& uuid, const py::object& marked, const py::object& cleared,

@@ -71,6 +71,7 @@ void LayerParams::validate() const
   {
     throw std::invalid_argument("clearing_scans must be 1..1000 scans, got " + std::to_string(clearing_scans));
   }
+  check_non_negative(lease_renewal_interval, "lease_renewal_interval", "s");
 }
 
 const char* triggerSourceName(TriggerSource source)
@@ -364,10 +365,12 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     }
   }
   const std::vector<std::uint32_t>& seen_free = outcome.touch.watched_free;
+  std::vector<std::uint32_t> seen_again;  // present cells this scan marked: an observation of the obstacle
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
     ObstacleUpdate update;
+    seen_again.clear();
     // The lists are sorted: each row of the rectangle is one contiguous index range in them.
     for (int y = r.min_y; y <= r.max_y; ++y)
     {
@@ -376,10 +379,11 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       for (auto it = std::lower_bound(marked_watched.begin(), marked_watched.end(), row_first);
            it != marked_watched.end() && *it <= row_last; ++it)
       {
-        if (!obstacle->cells.isPresent(*it) && !static_filter_.isStatic(*it))
+        if (static_filter_.isStatic(*it))
         {
-          update.marked.push_back(*it);
+          continue;
         }
+        (obstacle->cells.isPresent(*it) ? seen_again : update.marked).push_back(*it);
       }
       for (auto it = std::lower_bound(occupied.begin(), occupied.end(), row_first);
            it != occupied.end() && *it <= row_last; ++it)
@@ -400,9 +404,19 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         }
       }
     }
+    // Lease: cells seen occupied again renew the obstacle; sent when nobody renewed it for a while.
+    if (update.marked.empty() && !seen_again.empty() &&
+        !(now_s - obstacle->last_observation < params_.lease_renewal_interval))
+    {
+      update.marked = seen_again;
+    }
     if (update.marked.empty() && update.cleared.empty())
     {
       continue;
+    }
+    if (!update.marked.empty())
+    {
+      obstacle->last_observation = now_s;
     }
     update.uuid = obstacle->uuid;
     update.deadline = obstacle->deadline;
@@ -928,25 +942,18 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
     obstacle.deadline = update.deadline;
     obstacle.creator = update.source;
     obstacle.arrival_time = now_s;
+    obstacle.last_observation = now_s;
     found = shared_.emplace(update.uuid, std::move(obstacle)).first;
     result.added = true;
     countRectangle(found->second.rectangle_cells, +1);
-    // Cells of a new obstacle are not this robot's candidates any more: monitoring takes them over.
-    const CellRect& r = found->second.rectangle_cells;
-    shareable_.erase(std::remove_if(shareable_.begin(), shareable_.end(),
-                                    [&](std::uint32_t index) {
-                                      unsigned int mx = 0, my = 0;
-                                      g.indexToCells(index, mx, my);
-                                      const bool inside = r.contains(static_cast<int>(mx), static_cast<int>(my));
-                                      if (inside)
-                                      {
-                                        is_shareable_[index] = 0;
-                                      }
-                                      return inside;
-                                    }),
-                     shareable_.end());
+    dropShareableInside(found->second.rectangle_cells);
   }
   SharedObstacle& obstacle = found->second;
+  growRectangle(obstacle, update.rectangle);
+  if (!update.marked.empty())
+  {
+    obstacle.last_observation = now_s;
+  }
   obstacle.max_version = std::max(obstacle.max_version, update.version);
   result.changed = obstacle.cells.apply(update.marked, update.cleared, update.version, update.source);
   for (std::uint32_t index : update.marked)
@@ -957,6 +964,39 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   markDirty(update.cleared);
   result.ok = true;
   return result;
+}
+
+void SharingCore::growRectangle(SharedObstacle& obstacle, const Subsection& rectangle)
+{
+  const Subsection& r = obstacle.rectangle;
+  if (rectangle.min_x >= r.min_x && rectangle.min_y >= r.min_y && rectangle.max_x <= r.max_x &&
+      rectangle.max_y <= r.max_y)
+  {
+    return;
+  }
+  obstacle.rectangle = Subsection(std::min(r.min_x, rectangle.min_x), std::min(r.min_y, rectangle.min_y),
+                                  std::max(r.max_x, rectangle.max_x), std::max(r.max_y, rectangle.max_y));
+  countRectangle(obstacle.rectangle_cells, -1);
+  obstacle.rectangle_cells = obstacle.rectangle.cells(geometry());
+  countRectangle(obstacle.rectangle_cells, +1);
+  dropShareableInside(obstacle.rectangle_cells);
+}
+
+void SharingCore::dropShareableInside(const CellRect& rect)
+{
+  const GridGeometry& g = geometry();
+  shareable_.erase(std::remove_if(shareable_.begin(), shareable_.end(),
+                                  [&](std::uint32_t index) {
+                                    unsigned int mx = 0, my = 0;
+                                    g.indexToCells(index, mx, my);
+                                    const bool inside = rect.contains(static_cast<int>(mx), static_cast<int>(my));
+                                    if (inside)
+                                    {
+                                      is_shareable_[index] = 0;
+                                    }
+                                    return inside;
+                                  }),
+                   shareable_.end());
 }
 
 bool SharingCore::expire(const std::string& uuid)

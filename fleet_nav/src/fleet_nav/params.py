@@ -10,7 +10,8 @@ Lookup order for a costmap key K: ``global_costmap/K``, ``global_costmap/inflati
 ``DWAPlannerROS/``, then the top level. Layer parameters of the sharing layer come from
 ``sharing/`` or ``sharing_layer/`` (static_tolerance, proposal_strategy, trigger_debounce,
 cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost, clearing_margin,
-clearing_scans, clearing_time, clearing_neighbours, trigger_memory, trigger_radius, memory_on_stuck_feedback).
+clearing_scans, clearing_time, clearing_neighbours, trigger_memory, trigger_radius, memory_on_stuck_feedback,
+lease_renewal_interval).
 """
 import ast
 import math
@@ -22,7 +23,7 @@ from fleet_nav.errors import ParameterError
 SHARING_KEYS = ("static_tolerance", "proposal_strategy", "trigger_debounce", "cluster_gap",
                 "min_cluster_cells", "rectangle_padding", "max_update_cells", "static_occupied_cost",
                 "clearing_margin", "clearing_scans", "clearing_time", "clearing_neighbours", "trigger_memory",
-                "trigger_radius", "memory_on_stuck_feedback")
+                "trigger_radius", "memory_on_stuck_feedback", "lease_renewal_interval")
 
 
 def flatten(tree, prefix=""):

@@ -18,7 +18,7 @@ struct ObstacleUpdate
   std::vector<std::uint32_t> marked;   ///< cells seen occupied
   std::vector<std::uint32_t> cleared;  ///< cells seen free by raytracing
   std::uint32_t deadline = 0;          ///< seconds the obstacle lives after arriving at a robot
-  Subsection rectangle;                ///< monitored subsection, fixed at the first share
+  Subsection rectangle;                ///< monitored subsection; only grows (union), when obstacles merge
   std::string source;                  ///< robot that made this update
   GridGeometry geometry;               ///< grid the indexes refer to
   std::uint64_t version = 0;           ///< Lamport version of this update for this uuid
@@ -97,6 +97,7 @@ struct SharedObstacle
   std::string creator;           ///< source of the first update seen
   double arrival_time = 0.0;     ///< local time of the first update seen
   std::uint64_t max_version = 0; ///< highest version seen
+  double last_observation = 0.0; ///< local time of the last update with marked cells (any robot's), or arrival
   VersionedCellSet cells;
   /// Per present cell: this robot's current streak of evidence of free space (local monitoring state,
   /// never sent).

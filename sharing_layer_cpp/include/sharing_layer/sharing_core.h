@@ -44,6 +44,10 @@ struct LayerParams
   bool memory_on_stuck_feedback = false;
   // Plan-blocked trigger.
   double inscribed_radius = 0.25;          ///< new cells within this distance (m) of a plan pose ahead block the plan
+  /// Leases: a scan that sees present cells of a shared obstacle occupied again sends them as marked (an
+  /// observation, which renews the obstacle's deadline fleet-wide) when no observation of it, by any robot,
+  /// has been applied here for this long (s). Bounds the traffic of a block many robots keep seeing.
+  double lease_renewal_interval = 5.0;
 
   /// @throws std::invalid_argument naming the parameter and its value
   void validate() const;
@@ -253,6 +257,11 @@ private:
   void markDirty(const std::vector<std::uint32_t>& cells);
   bool insideMonitoredRectangle(std::uint32_t index) const { return monitored_[index] != 0; }
   void countRectangle(const CellRect& rect, int delta);
+  /// @brief The union of the monitored rectangles: an obstacle's rectangle only grows (merging), here as in
+  /// the handler, so its monitoring covers every cell the fleet added to it.
+  void growRectangle(SharedObstacle& obstacle, const Subsection& rectangle);
+  /// @brief Cells inside a new or grown rectangle stop being this robot's candidates: monitoring has them.
+  void dropShareableInside(const CellRect& rect);
 
   LayerParams params_;
   CostGrid obstacles_;
