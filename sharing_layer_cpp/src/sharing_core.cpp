@@ -404,6 +404,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         }
       }
     }
+    growInto(*obstacle, update.marked);
     // Lease: cells seen occupied again renew the obstacle; sent when nobody renewed it for a while.
     if (update.marked.empty() && !seen_again.empty() &&
         !(now_s - obstacle->last_observation < params_.lease_renewal_interval))
@@ -459,13 +460,30 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
       memory_.erase(found);
     }
   }
+  for (std::uint32_t index : touch.watched_cleared)
+  {
+    auto found = memory_.find(index);
+    if (found != memory_.end())
+    {
+      found->second.marks = 0;  // a beam passed through it: not marked steadily
+    }
+  }
   const float sx = static_cast<float>(observation.origin.x);
   const float sy = static_cast<float>(observation.origin.y);
   for (std::uint32_t index : touch.marked)
   {
     if (!static_filter_.isStatic(index))
     {
-      memory_[index] = RememberedCell{ now_s, sx, sy, FreeStreak() };
+      RememberedCell& cell = memory_[index];
+      if (cell.marks == 0)
+      {
+        cell.marked_since = now_s;
+      }
+      cell.marks = static_cast<std::uint16_t>(std::min<int>(cell.marks + 1, 0xFFFF));
+      cell.time = now_s;
+      cell.sensor_x = sx;
+      cell.sensor_y = sy;
+      cell.free.reset();
     }
   }
 }
@@ -964,6 +982,89 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   markDirty(update.cleared);
   result.ok = true;
   return result;
+}
+
+void SharingCore::growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& marked)
+{
+  if (shareable_.empty() || obstacle.cells.presentCount() == 0)
+  {
+    return;
+  }
+  const GridGeometry& g = geometry();
+  const int gap = static_cast<int>(params_.cluster_gap);
+  std::vector<std::uint32_t> grown;
+  auto touches = [&](std::uint32_t index) {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    for (int dy = -gap; dy <= gap; ++dy)
+    {
+      for (int dx = -gap; dx <= gap; ++dx)
+      {
+        const long x = static_cast<long>(mx) + dx, y = static_cast<long>(my) + dy;
+        if ((dx == 0 && dy == 0) || x < 0 || y < 0 || x >= static_cast<long>(g.size_x) ||
+            y >= static_cast<long>(g.size_y))
+        {
+          continue;
+        }
+        const std::uint32_t n = g.getIndex(static_cast<unsigned int>(x), static_cast<unsigned int>(y));
+        if (obstacle.cells.isPresent(n) || std::find(grown.begin(), grown.end(), n) != grown.end())
+        {
+          return true;
+        }
+      }
+    }
+    return false;
+  };
+  // Chains: a cell touching one just taken is taken too, until nothing more touches.
+  std::vector<std::uint32_t> left;
+  for (std::uint32_t index : shareable_)
+  {
+    const auto found = memory_.find(index);
+    if (found != memory_.end() && found->second.marks >= params_.clearing_scans &&
+        found->second.time - found->second.marked_since >= params_.clearing_time)
+    {
+      left.push_back(index);
+    }
+  }
+  for (bool taken = true; taken;)
+  {
+    taken = false;
+    for (auto it = left.begin(); it != left.end();)
+    {
+      if (touches(*it))
+      {
+        grown.push_back(*it);
+        it = left.erase(it);
+        taken = true;
+      }
+      else
+      {
+        ++it;
+      }
+    }
+  }
+  if (grown.empty())
+  {
+    return;
+  }
+  double min_x = obstacle.rectangle.min_x, min_y = obstacle.rectangle.min_y;
+  double max_x = obstacle.rectangle.max_x, max_y = obstacle.rectangle.max_y;
+  for (std::uint32_t index : grown)
+  {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    double cx = 0.0, cy = 0.0;
+    g.mapToWorld(mx, my, cx, cy);
+    const double half = 0.5 * g.resolution;
+    min_x = std::min(min_x, cx - half);
+    min_y = std::min(min_y, cy - half);
+    max_x = std::max(max_x, cx + half);
+    max_y = std::max(max_y, cy + half);
+  }
+  growRectangle(obstacle, Subsection(min_x, min_y, max_x, max_y));
+  marked.insert(marked.end(), grown.begin(), grown.end());
+  std::sort(marked.begin(), marked.end());
+  marked.erase(std::unique(marked.begin(), marked.end()), marked.end());
 }
 
 void SharingCore::growRectangle(SharedObstacle& obstacle, const Subsection& rectangle)

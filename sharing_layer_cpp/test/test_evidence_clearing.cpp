@@ -155,7 +155,16 @@ TEST(EvidenceClearing, BlockSurvivesRobotsDrivingPastAndAwayWithUpstreamDefaults
   {
     EXPECT_TRUE(std::binary_search(now_shared.begin(), now_shared.end(), index)) << "face cell " << index << " lost";
   }
-  EXPECT_EQ(face, now_shared);  // the rectangle holds only the west face: nothing added, nothing removed
+  // Driving past, the robot saw the block's other faces: they joined it (growing), and nothing else did.
+  EXPECT_GE(now_shared.size(), face.size());
+  const GridGeometry g = grid();
+  for (std::uint32_t index : now_shared)
+  {
+    double x = 0.0, y = 0.0;
+    g.mapToWorld(index % g.size_x, index / g.size_x, x, y);
+    EXPECT_TRUE(x > 5.02 - 0.05 && x < 5.47 + 0.05 && y > 4.53 - 0.05 && y < 5.48 + 0.05)
+        << "shared cell (" << x << ", " << y << ") is not the block's";
+  }
 }
 
 TEST(EvidenceClearing, SameDrivesErodeTheBlockWithSingleScanRaytraceClearing)

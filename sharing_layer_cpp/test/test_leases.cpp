@@ -168,3 +168,72 @@ TEST(MergedRectangles, AGrownRectangleIsMonitoredAndItsCellsAreNoLongerProposed)
   ASSERT_TRUE(core.applyShared(shared("block", { grid().getIndex(100, 91) }, south, 9, "robot_2"), 4.0).ok);
   EXPECT_EQ(5.5, core.sharedObstacles().at("block").rectangle.max_y);
 }
+
+TEST(Growing, APartlySharedBlockGrowsOverItsWholeFaceAsTheRobotSeesIt)
+{
+  // The plan trigger fires on the first cells of a block seen on the plan: only the middle of its face is
+  // shared. The robot keeps seeing the face: cells marked steadily that touch the obstacle join it.
+  const SimWorld world = blockWorld();
+  SharingCore core = makeCore();
+  const GridGeometry g = grid();
+  std::vector<std::uint32_t> middle;
+  for (unsigned int y = 98; y <= 101; ++y)
+  {
+    middle.push_back(g.getIndex(100, y));
+  }
+  ASSERT_TRUE(core.applyShared(shared("block", middle, Subsection(5.0, 4.9, 5.05, 5.1), 1, "robot_0"), 1.0).ok);
+
+  std::vector<std::uint32_t> added;
+  double t = 1.0;
+  std::vector<ObstacleUpdate> first = scanAt(core, world, 3.6, 5.0, 0.0, t);
+  EXPECT_TRUE(first.empty()) << "one scan is not steady: nothing grows";
+  for (int i = 0; i < 15; ++i)
+  {
+    t += 0.1;
+    for (const ObstacleUpdate& u : scanAt(core, world, 3.6, 5.0, 0.0, t))
+    {
+      EXPECT_TRUE(u.cleared.empty());
+      added.insert(added.end(), u.marked.begin(), u.marked.end());
+      EXPECT_EQ(core.sharedObstacles().at("block").rectangle.min_y, u.rectangle.min_y);
+    }
+  }
+  const std::vector<std::uint32_t> cells = core.sharedCells("block");
+  // The whole west face (rows 91..109 of column 100, y 4.55..5.5), the same cells the robot's own view marks.
+  for (unsigned int y = 91; y <= 109; ++y)
+  {
+    EXPECT_TRUE(std::binary_search(cells.begin(), cells.end(), g.getIndex(100, y))) << "face row " << y << " missing";
+  }
+  for (std::uint32_t index : cells)
+  {
+    EXPECT_EQ(100u, index % g.size_x) << "cell off the face: (" << index % g.size_x << ", " << index / g.size_x << ")";
+  }
+  EXPECT_FALSE(added.empty());
+  const Subsection& r = core.sharedObstacles().at("block").rectangle;
+  EXPECT_LE(r.min_y, 4.55);
+  EXPECT_GE(r.max_y, 5.45);
+  EXPECT_TRUE(core.shareableCells().empty()) << "the face is the obstacle's now, not a candidate";
+}
+
+TEST(Growing, NeitherWallsNorSeparateObjectsJoin)
+{
+  // A second box 0.3 m north of the block (beyond cluster_gap) and the outer wall stay out of the obstacle.
+  SimWorld world = blockWorld();
+  world.box(5.02, 5.8, 5.3, 6.2);
+  SharingCore core = makeCore();
+  const GridGeometry g = grid();
+  std::vector<std::uint32_t> face;  // the block's west face only (a thesis sectors proposal would take both)
+  for (unsigned int y = 91; y <= 109; ++y)
+  {
+    face.push_back(g.getIndex(100, y));
+  }
+  ASSERT_TRUE(core.applyShared(shared("block", face, Subsection(5.0, 4.5, 5.05, 5.5), 1, "robot_0"), 1.0).ok);
+  for (double t = 1.1; t < 4.0; t += 0.1)
+  {
+    scanAt(core, world, 3.6, 5.4, 0.0, t);
+  }
+  EXPECT_FALSE(core.shareableCells().empty()) << "the other box is seen: a candidate of its own";
+  for (std::uint32_t index : core.sharedCells("block"))
+  {
+    EXPECT_LE(index / g.size_x, 110u) << "a cell of the other box joined the block";
+  }
+}

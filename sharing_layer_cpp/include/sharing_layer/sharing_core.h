@@ -100,6 +100,11 @@ struct RememberedCell
   float sensor_x = 0.0f;        ///< where the sensor was then (grid frame, m)
   float sensor_y = 0.0f;
   FreeStreak free;              ///< evidence of free space since the last sign of occupancy
+  /// Scans in a row that marked it (a scan whose beam passed through it without marking it ends the row), and
+  /// the time of the first of them: a shared obstacle grows only over cells marked steadily (growInto), not
+  /// over the cells next to a face that localisation noise marks now and then.
+  std::uint16_t marks = 0;
+  double marked_since = 0.0;
 };
 
 
@@ -162,7 +167,8 @@ public:
    * beyond it, and no scan in between showed a sign of occupancy (an endpoint in the cell at any range, or
    * a beam through it ending less than clearing_margin behind it); scans that do not see the cell do not
    * interrupt the streak. Remembered cells leave the trigger memory by the same rule. The obstacle grid
-   * itself is cleared and marked with costmap_2d's rules.
+   * itself is cleared and marked with costmap_2d's rules. Shareable cells touching a shared obstacle in view
+   * join it (growInto); present cells seen occupied again renew it every lease_renewal_interval.
    */
   ScanOutcome processScan(const Observation& observation, double now_s);
 
@@ -260,6 +266,13 @@ private:
   /// @brief The union of the monitored rectangles: an obstacle's rectangle only grows (merging), here as in
   /// the handler, so its monitoring covers every cell the fleet added to it.
   void growRectangle(SharedObstacle& obstacle, const Subsection& rectangle);
+  /// @brief Growing: shareable cells (non-static, marked, in obstacle_range) that touch the obstacle's present
+  /// cells, within cluster_gap, directly or through each other, are part of it: they join `marked` and the
+  /// rectangle grows over them. Only cells marked steadily count: in clearing_scans scans in a row over
+  /// clearing_time (the evidence that clears a cell, mirrored), which needs the trigger memory (trigger_memory > 0). A block first seen in part (the plan trigger fires on its first cells) ends
+  /// whole in the fleet as the robot sees more of it, instead of its rest waiting for a trigger that may
+  /// never come (navfn's detour no longer runs into it).
+  void growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& marked);
   /// @brief Cells inside a new or grown rectangle stop being this robot's candidates: monitoring has them.
   void dropShareableInside(const CellRect& rect);
 
