@@ -1,11 +1,13 @@
 #!/usr/bin/python3
 """Test 1 of the thesis (DESIGN.md §8), node of test1_share.test: share and react.
 
-robot_0 drives to the orange goal behind both blocks: it gets stuck once at each block, each
-block is shared once, and it reaches the goal through the open (left) corridor. robot_1, sent
-afterwards to the purple goal behind the same blocks, plans the open route from the start: no
-stuck event, no plan or pose of it inside a blocked corridor. robot_1, which robot_0 sees at the
-start, is never shared. At the end both robots hold the same obstacle list.
+robot_0 drives to the orange goal behind both blocks. It runs move_base's defaults, so nothing
+publishes stuck_feedback: each block is shared once, from the sharing layer's plan-blocked
+trigger as the block appears on its plan (and grown over the rest of the face as robot_0 sees
+it), and robot_0 reaches the goal through the open (left) corridor without passing a block.
+robot_1, sent afterwards to the purple goal behind the same blocks, plans the open route from the
+start: no plan or pose of it inside a blocked corridor. robot_1, which robot_0 sees at the start,
+is never shared. At the end both robots hold the same obstacle list.
 """
 import math
 
@@ -28,8 +30,8 @@ class Test1Share(FleetTestCase):
 
         self.assert_succeeded(r0, "orange", r0.go("orange", 300.0))
 
-        # Stuck once at each block, each block shared once (and nothing else shared).
-        self.assertEqual(len(blocks), len(r0.stuck), "robot_0 stuck events %s, expected one per block" % r0.stuck)
+        # Each block shared once (and nothing else shared), without a stuck signal.
+        self.assertEqual([], r0.stuck, "stuck_feedback in move_base's default mode")
         shares = r0.shares()
         rects = [tuple(m.rectangle_shape) for _t, m in shares]
         self.assertEqual(len(blocks), len(shares), "robot_0 shared %d obstacles %s, expected one per block"
@@ -41,8 +43,6 @@ class Test1Share(FleetTestCase):
             near = [m for _t, m in shares
                     if all(inside(box, *cell_centre(m, i), margin=0.15) for i in m.marked_indexes)]
             self.assertEqual(1, len(near), "block %s: %d shares lie on it (rectangles %s)" % (name, len(near), rects))
-            stuck_near = [s for s in r0.stuck if abs(s[1] - bx) < 1.5 and by - 3.0 < s[2] < by]
-            self.assertEqual(1, len(stuck_near), "robot_0 stuck %s, expected once below %s" % (r0.stuck, name))
         # robot_1 is never shared: no shared cell near where it stands.
         for _t, m in shares:
             for i in m.marked_indexes:

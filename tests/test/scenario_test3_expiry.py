@@ -1,13 +1,16 @@
 #!/usr/bin/python3
-"""Test 3 of the thesis (DESIGN.md §8), node of test3_expiry.test: partial re-add and expiry.
+"""Test 3 of the thesis (DESIGN.md §8), node of test3_expiry.test: re-add of a moved block and expiry.
 
-robot_0 shares block_right (stuck once on its way to orange; block_middle is taken away first) and
+robot_0 shares block_right (on its way to orange; block_middle is taken away first) and
 drives on. The block is put back slightly moved (turned by ~11 degrees about the middle of the
 monitored rectangle), so that only part of its face lies in the rectangle. robot_1 drives to red,
-below the block, and monitors the obstacle: its updates carry only cells inside the rectangle,
-although it sees the face outside too. Once robot_1 has reached red (obstacle layer reset) both
-robots hold the same cells. robot_1 drives back to its start; after the deadline the obstacle is
-gone from both lists and both costmaps, and neither robot sent or received a message for it.
+below the block, and monitors the obstacle. The thesis limited its updates to the rectangle;
+since issue 12 face cells that touch the obstacle join it (growing) and the rectangle only
+grows, so the test checks that robot_1's updates keep every cell on the old or the moved face,
+never shrink the rectangle, and reach robot_0: once robot_1 has reached red (obstacle layer
+reset) both robots hold the same cells. robot_1 drives back to its start; nobody sees the block
+any more, so its lease is not renewed: within obstacle_duration the obstacle is gone from both
+lists and both costmaps, and neither robot sent or received a message for it meanwhile.
 """
 import math
 
@@ -50,6 +53,9 @@ class Test3Expiry(FleetTestCase):
         uuid = first.uuid
         rect = tuple(first.rectangle_shape)
         fleet.wait_until(lambda: r0.pose[0] < 8.5, 60.0, "robot_0 to leave the right corridor")
+        # robot_0 saw more of the face on its way: the obstacle grew over it (the plan trigger shares
+        # the first cells of a block seen on the plan). The monitored rectangle is the one held now.
+        rect = r0.obstacles()[uuid][2]
 
         # Put the block back turned about the middle of the rectangle: its face (the side robot_1
         # will see) crosses the rectangle's band in the middle and leaves it on both sides.
@@ -71,13 +77,18 @@ class Test3Expiry(FleetTestCase):
             with fleet.lock:
                 return [m for t, m in r1.to_fleet if t >= readded_at and m.uuid == uuid]
         updates = fleet.wait_until(r1_updates, 20.0, "robot_1's update of %s" % uuid)
+        def on_a_face(x, y):
+            return inside(rect, x, y, margin=0.03) or min(math.hypot(x - fx, y - fy) for fx, fy in face) < 0.12
+
         for m in updates:
             self.assertEqual("robot_1", m.source)
-            self.assertEqual(rect, tuple(m.rectangle_shape), "the rectangle changed")
+            self.assertTrue(inside(tuple(m.rectangle_shape), rect[0], rect[1], margin=1e-3)
+                            and inside(tuple(m.rectangle_shape), rect[2], rect[3], margin=1e-3),
+                            "the rectangle shrank from %s to %s" % (rect, tuple(m.rectangle_shape)))
             for i in list(m.marked_indexes) + list(m.cleared_indexes):
                 x, y = cell_centre(m, i)
-                self.assertTrue(inside(rect, x, y, margin=0.03),
-                                "robot_1 shared cell (%.2f, %.2f) outside the rectangle %s" % (x, y, rect))
+                self.assertTrue(on_a_face(x, y), "robot_1 shared cell (%.2f, %.2f), on neither the old face in %s "
+                                "nor the moved face" % (x, y, rect))
         self.assertTrue(any(m.marked_indexes for m in updates) or any(m.cleared_indexes for m in updates),
                         "robot_1's updates change nothing")
 
@@ -88,11 +99,7 @@ class Test3Expiry(FleetTestCase):
         self.assertTrue(cells, "the moved block left no cell in the obstacle")
         for i in cells:
             x, y = cell_centre(first, i)
-            self.assertTrue(inside(rect, x, y, margin=0.03), "cell (%.2f, %.2f) outside %s" % (x, y, rect))
-        for x, y in outside:
-            self.assertNotIn(int((y - first.origin_y) / first.resolution) * first.size_x
-                             + int((x - first.origin_x) / first.resolution), cells,
-                             "a face cell outside the rectangle was shared")
+            self.assertTrue(on_a_face(x, y), "cell (%.2f, %.2f) on neither face" % (x, y))
 
         # robot_1 leaves; from now on nothing is sent or received about the obstacle.
         self.reach(r1, "start_1")
