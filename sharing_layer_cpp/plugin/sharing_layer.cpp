@@ -82,7 +82,7 @@ void SharingLayer::onInitialize()
   private_nh.param("raytrace_range", params_.limits.raytrace_range, 3.0);
   private_nh.param("min_obstacle_height", params_.limits.min_obstacle_height, 0.0);
   private_nh.param("max_obstacle_height", params_.limits.max_obstacle_height, 2.0);
-  private_nh.param("static_tolerance", params_.static_tolerance, 2);
+  private_nh.param("static_tolerance", params_.static_tolerance, 3);
   int occupied = 254;
   private_nh.param("static_occupied_cost", occupied, 254);
   params_.static_occupied_cost = static_cast<std::uint8_t>(std::min(255, std::max(1, occupied)));

@@ -290,7 +290,7 @@ PYBIND11_MODULE(_sharing_core, m)
              return p;
            }),
            py::arg("obstacle_range") = 2.5, py::arg("raytrace_range") = 3.0, py::arg("min_obstacle_height") = 0.0,
-           py::arg("max_obstacle_height") = 2.0, py::arg("static_tolerance") = 2,
+           py::arg("max_obstacle_height") = 2.0, py::arg("static_tolerance") = 3,
            py::arg("static_occupied_cost") = 254, py::arg("proposal_strategy") = "sectors",
            py::arg("trigger_debounce") = 2.0, py::arg("cluster_gap") = 1, py::arg("min_cluster_cells") = 1,
            py::arg("rectangle_padding") = 0.0, py::arg("max_update_cells") = 1000000,

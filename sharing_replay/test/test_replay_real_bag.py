@@ -100,8 +100,8 @@ def test_plan_trigger_shares_the_block_with_the_defaults_and_no_cell_by_a_wall(t
             on_block.append(obstacle)
     assert on_block, "the block at x ~ 23 was not shared: %s" % summary["obstacles"]
     assert min(o["t"] for o in on_block) < 20.0, on_block
-    # Over every obstacle, not a subset: no cell within static_tolerance (2 cells) of an occupied or
-    # unknown map cell, counted by the replay's own false-share check at that distance.
-    _code, near2, text2 = replay(tmp_path / "near2", "--wall-distance", "2")
-    assert near2["false_shares"]["cells_near_walls"] == 0, text2
-    assert near2["false_shares"]["cells_near_occupied"] == 0 and near2["false_shares"]["cells_near_unknown"] == 0
+    # Over every obstacle, not a subset: no cell within 0.3 m (3 cells, the replay's default
+    # --wall-distance; static_tolerance is 3 cells) of an occupied or unknown map cell, counted by
+    # the replay's own false-share check.
+    assert summary["false_shares"]["cells_near_walls"] == 0, text
+    assert summary["false_shares"]["cells_near_occupied"] == 0 and summary["false_shares"]["cells_near_unknown"] == 0, text

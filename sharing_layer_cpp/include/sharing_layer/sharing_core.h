@@ -21,7 +21,7 @@ namespace sharing_layer
 struct LayerParams
 {
   ScanLimits limits;                       ///< obstacle_range 2.5, raytrace_range 3.0, heights 0..2
-  int static_tolerance = 2;                ///< cells around the static map that never count as new
+  int static_tolerance = 3;                ///< cells around the static (or unknown) map that are never shared: 0.3 m on a 0.1 m map
   std::uint8_t static_occupied_cost = 254; ///< static costs at or above this are walls
   ProposalStrategy strategy = ProposalStrategy::Sectors;
   double trigger_debounce = 2.0;           ///< seconds without a stuck signal that end a burst

@@ -96,7 +96,7 @@ def summarise(replay, bag_path):
         "robots": sorted(r.name for r in replay.robots.values()),
         "obstacles_shared": len(replay.obstacles),
         "proposals": events.get("proposal", 0),
-        "redundant_proposals": sum(r.handler.counters["redundant"] for r in replay.robots.values()),
+        "merged_proposals": sum(r.handler.counters["merged_proposals"] for r in replay.robots.values()),
         "triggers": events.get("trigger", 0),
         "plan_triggers": events.get("plan_trigger", 0),
         "plans": events.get("plan", 0),
@@ -134,8 +134,8 @@ def summary_text(summary):
     fs = summary["false_shares"]
     lines = [
         "bag: %s (%.1f s, robots %s)" % (summary["bag"], summary["bag_duration_s"], ", ".join(summary["robots"])),
-        "obstacles shared: %d (proposals %d, redundant %d, triggers %d, plan triggers %d)" % (
-            summary["obstacles_shared"], summary["proposals"], summary["redundant_proposals"], summary["triggers"],
+        "obstacles shared: %d (proposals %d, merged into a live obstacle %d, triggers %d, plan triggers %d)" % (
+            summary["obstacles_shared"], summary["proposals"], summary["merged_proposals"], summary["triggers"],
             summary["plan_triggers"]),
         "updates: %d, received by other robots: %d, expiries: %d" % (
             summary["updates"], summary["received"], summary["expiries"]),

@@ -247,8 +247,8 @@ class _Robot:
             shared = self.handler.on_proposal(obstacle)
             held = replay.release_events()
             after = self.handler.counters
-            outcome = ("authorised" if shared is not None else
-                       "redundant" if after["redundant"] > before["redundant"] else "dropped")
+            outcome = ("merged" if after["merged_proposals"] > before["merged_proposals"] else
+                       "authorised" if shared is not None else "dropped")
             replay.emit("proposal", self.name, uuid=shared.uuid if shared is not None else None,
                         cells=int(cells.size), rectangle=[round(v, 4) for v in proposal.rectangle],
                         robot_xy=[round(rx, 3), round(ry, 3)], outcome=outcome)
