@@ -144,24 +144,30 @@ class TestHandlerNode(unittest.TestCase):
         self.assertTrue(55 <= listed.deadline <= 60, listed.deadline)
         type(self).own = shared
 
-    def test_02_overlapping_proposal_is_not_new(self):
+    def test_02_overlapping_proposal_is_an_update_of_the_live_obstacle(self):
         bus = self.bus
         bus.proposals.publish(obstacle(marked=(310,), rect=(0.25, 0.25, 1.0, 1.0), source="robot_0",
                                        version=0, deadline=0))
-        wait_for(lambda: bus.counter("redundant") == 1, what="redundant = 1 on /diagnostics")
+        wait_for(lambda: bus.counter("merged_proposals") == 1, what="merged_proposals = 1 on /diagnostics")
         self.assertEqual(bus.counter("proposals"), 2)
-        self.assertEqual((len(bus.shared), len(bus.fleet)), (1, 1))
+        wait_for(lambda: (len(bus.shared), len(bus.fleet)) == (2, 2), what="the update to the layer and fleet")
+        for m in (bus.shared[1], bus.fleet[1]):
+            self.assertEqual((m.uuid, m.version, list(m.marked_indexes)), (self.own.uuid, 2, [310]))
+            self.assertEqual(list(m.rectangle_shape), [0.0, 0.0, 1.0, 1.0])
+        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [303, 304, 305, 310],
+                 what="the merged cells in the list")
 
     def test_03_internal_update_goes_to_the_fleet_and_is_applied_not_echoed(self):
         bus = self.bus
         bus.updates.publish(obstacle(uuid=self.own.uuid, marked=(306,), cleared=(303,), version=2,
                                      source="robot_0", deadline=60, rect=(0.0, 0.0, 0.5, 0.5)))
-        wait_for(lambda: len(bus.fleet) == 2, what="the update on to_fleet")
-        self.assertEqual((bus.fleet[1].uuid, bus.fleet[1].version), (self.own.uuid, 2))
-        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [304, 305, 306],
+        wait_for(lambda: len(bus.fleet) == 3, what="the update on to_fleet")
+        # version 2 is taken (the merged proposal): re-stamped 3
+        self.assertEqual((bus.fleet[2].uuid, bus.fleet[2].version), (self.own.uuid, 3))
+        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [304, 305, 306, 310],
                  what="the update applied in the list")
-        self.assertEqual(bus.listed()[self.own.uuid].version, 2)
-        self.assertEqual(len(bus.shared), 1, "internal updates are not sent back to the layer")
+        self.assertEqual(bus.listed()[self.own.uuid].version, 3)
+        self.assertEqual(len(bus.shared), 2, "internal updates are not sent back to the layer")
 
     def test_04_external_add_and_update_go_to_the_layer_and_never_back_out(self):
         bus = self.bus
@@ -173,9 +179,9 @@ class TestHandlerNode(unittest.TestCase):
                                         deadline=30, rect=(2.0, 0.0, 2.5, 0.5), source="robot_2"))
         wait_for(lambda: list(bus.listed()[EXT1].marked_indexes) == [1001, 1002, 1003],
                  what="ext-1 updated")
-        self.assertEqual([m.uuid for m in bus.shared[1:]], [EXT1, EXT1])
-        self.assertEqual([m.version for m in bus.shared[1:]], [1, 2])
-        self.assertEqual(len(bus.fleet), 2, "external messages are never sent back out")
+        self.assertEqual([m.uuid for m in bus.shared[2:]], [EXT1, EXT1])
+        self.assertEqual([m.version for m in bus.shared[2:]], [1, 2])
+        self.assertEqual(len(bus.fleet), 3, "external messages are never sent back out")
         listed = bus.listed()[EXT1]
         self.assertEqual((listed.source, listed.version), ("robot_1", 2))
         reply = self.list_srv()
@@ -212,7 +218,7 @@ class TestHandlerNode(unittest.TestCase):
             wait_for(lambda: bus.counter("dropped_" + reason) == 1, what="dropped_%s = 1" % reason)
         self.assertEqual(bus.counter("dropped"), len(bad))
         self.assertEqual({u: list(o.marked_indexes) for u, o in bus.listed().items()}, listed_before)
-        self.assertEqual(len(bus.fleet), 2)
+        self.assertEqual(len(bus.fleet), 3)
         for reason in bad:
             lines = [line for line in bus.rosout if "dropped" in line and reason in line]
             if reason == "own_source":
@@ -231,22 +237,25 @@ class TestHandlerNode(unittest.TestCase):
         wait_for(lambda: bus.fleet[-1].uuid == reply.uuid and bus.shared[-1].uuid == reply.uuid,
                  what="the manual obstacle on to_fleet and shared_obstacles")
         self.assertEqual((list(bus.fleet[-1].marked_indexes), bus.fleet[-1].deadline), ([0, 1], 60))
-        refused = self.add_srv(rectangle_shape=[-5.0, -2.5, -4.9, -2.45], marked_indexes=[], deadline=0)
-        self.assertFalse(refused.success)
-        self.assertIn(reply.uuid, refused.message)
+        # the same rectangle again: an observation of that obstacle, sent as an update of it
+        again = self.add_srv(rectangle_shape=[-5.0, -2.5, -4.9, -2.45], marked_indexes=[], deadline=0)
+        self.assertTrue(again.success, again.message)
+        self.assertEqual(again.uuid, reply.uuid)
+        wait_for(lambda: bus.fleet[-1].uuid == reply.uuid and bus.fleet[-1].version == 2,
+                 what="the update of the manual obstacle on to_fleet")
 
     def test_07_expiry_tells_the_layer_and_sends_nothing_to_the_fleet(self):
         bus = self.bus
         fleet_before = len(bus.fleet)
         bus.from_fleet.publish(obstacle(uuid=SHORT1, marked=(2000,), version=1, deadline=1,
-                                        rect=(3.0, 0.0, 3.5, 0.5), source="robot_3"))
+                                        rect=(3.2, 0.0, 3.7, 0.5), source="robot_3"))  # beyond merge_distance of ext-1
         wait_for(lambda: SHORT1 in bus.listed(), what="short-1 in the list")
         wait_for(lambda: SHORT1 in bus.expired, timeout=4, what="short-1 on expired_obstacles")
         wait_for(lambda: SHORT1 not in bus.listed(), what="short-1 gone from the list")
         self.assertEqual(len(bus.fleet), fleet_before)
         # a late message for it does not bring it back
         bus.from_fleet.publish(obstacle(uuid=SHORT1, marked=(2001,), version=2, deadline=1,
-                                        rect=(3.0, 0.0, 3.5, 0.5), source="robot_4"))
+                                        rect=(3.2, 0.0, 3.7, 0.5), source="robot_4"))
         wait_for(lambda: bus.counter("dropped_expired") == 1, what="dropped_expired = 1")
         self.assertNotIn(SHORT1, bus.listed())
         self.assertEqual(bus.counter("expired"), 1)

@@ -61,7 +61,7 @@ DROP_REASONS = (
 )
 
 #: Counters besides the drops.
-EVENT_COUNTERS = ("proposals", "authorised", "redundant", "manual", "updates_in", "updates_out",
+EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_out",
                   "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals")
 
 
@@ -317,8 +317,9 @@ class SharingHandler:
             self.on_external(obstacle)
 
     def on_proposal(self, obstacle):
-        """A new obstacle proposed by the layer. Returns the authorised Obstacle, or None when it
-        was redundant or invalid."""
+        """A new obstacle proposed by the layer. Returns the authorised Obstacle (version 1), the
+        update it became when it lies within merge_distance of a live obstacle, or None when it
+        was invalid."""
         self._counters["proposals"] += 1
         try:
             if obstacle.uuid:
