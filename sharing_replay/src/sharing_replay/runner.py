@@ -377,6 +377,10 @@ class Replay:
         if record is not None:
             if obstacle.version > 1:
                 record["updates"] += 1
+            # rectangles only grow (merging): the record shows the union, as every handler holds it
+            r = record["rectangle"]
+            g = obstacle.rectangle.as_list()
+            record["rectangle"] = [min(r[0], g[0]), min(r[1], g[1]), max(r[2], g[2]), max(r[3], g[3])]
             for cell in obstacle.marked:
                 record["cell_time"].setdefault(cell, self.now)
                 record["cleared"].discard(cell)
