@@ -6,6 +6,7 @@
 #include <iterator>
 #include <limits>
 #include <stdexcept>
+#include <unordered_set>
 
 #include "sharing_layer/cost_values.h"
 #include "sharing_layer/scan_update.h"
@@ -138,6 +139,7 @@ SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params
                         FREE_SPACE);
   is_shareable_.assign(geometry.cellCount(), 0);
   monitored_.assign(geometry.cellCount(), 0);
+  steady_flag_.assign(geometry.cellCount(), 0);
 }
 
 void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count)
@@ -366,6 +368,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   }
   const std::vector<std::uint32_t>& seen_free = outcome.touch.watched_free;
   std::vector<std::uint32_t> seen_again;  // present cells this scan marked: an observation of the obstacle
+  std::vector<std::uint32_t> steady = steadyShareable();  // growth candidates, computed once per scan
+  const std::vector<std::uint32_t> steady_all = steady;   // to reset their flags
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
@@ -404,7 +408,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         }
       }
     }
-    growInto(*obstacle, update.marked);
+    growInto(*obstacle, steady, update.marked);
     // Lease: cells seen occupied again renew the obstacle; sent when nobody renewed it for a while.
     if (update.marked.empty() && !seen_again.empty() &&
         !(now_s - obstacle->last_observation < params_.lease_renewal_interval))
@@ -431,6 +435,10 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     markDirty(update.marked);
     markDirty(update.cleared);
     outcome.updates.push_back(std::move(update));
+  }
+  for (std::uint32_t index : steady_all)
+  {
+    steady_flag_[index] = 0;
   }
   return outcome;
 }
@@ -984,30 +992,71 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   return result;
 }
 
-void SharingCore::growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& marked)
+std::vector<std::uint32_t> SharingCore::steadyShareable()
 {
-  if (shareable_.empty() || obstacle.cells.presentCount() == 0)
+  std::vector<std::uint32_t> steady;
+  for (std::uint32_t index : shareable_)
+  {
+    const auto found = memory_.find(index);
+    if (found != memory_.end() && found->second.marks >= params_.clearing_scans &&
+        found->second.time - found->second.marked_since >= params_.clearing_time)
+    {
+      steady.push_back(index);
+      steady_flag_[index] = 1;
+    }
+  }
+  return steady;
+}
+
+bool SharingCore::steadyInRing(const CellRect& r, int gap) const
+{
+  const GridGeometry& g = geometry();
+  const int x0 = std::max(0, r.min_x - gap), x1 = std::min(static_cast<int>(g.size_x) - 1, r.max_x + gap);
+  const int y0 = std::max(0, r.min_y - gap), y1 = std::min(static_cast<int>(g.size_y) - 1, r.max_y + gap);
+  for (int y = y0; y <= y1; ++y)
+  {
+    const std::uint8_t* row = steady_flag_.data() + static_cast<std::size_t>(y) * g.size_x;
+    auto any = [&](int from, int to) { return std::any_of(row + from, row + to + 1, [](std::uint8_t f) { return f != 0; }); };
+    if (y < r.min_y || y > r.max_y ? any(x0, x1)
+                                   : (x0 <= r.min_x - 1 && any(x0, r.min_x - 1)) || (r.max_x + 1 <= x1 && any(r.max_x + 1, x1)))
+    {
+      return true;
+    }
+  }
+  return false;
+}
+
+void SharingCore::growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& steady,
+                           std::vector<std::uint32_t>& marked)
+{
+  if (steady.empty() || obstacle.cells.presentCount() == 0)
   {
     return;
   }
   const GridGeometry& g = geometry();
   const int gap = static_cast<int>(params_.cluster_gap);
+  // A candidate touching the obstacle lies in the ring of width cluster_gap around its rectangle (cells inside
+  // are monitored, never shareable): most obstacles in view have none there.
+  if (!steadyInRing(obstacle.rectangle_cells, gap))
+  {
+    return;
+  }
+  std::unordered_set<std::uint32_t> grown_set;
   std::vector<std::uint32_t> grown;
   auto touches = [&](std::uint32_t index) {
-    unsigned int mx = 0, my = 0;
-    g.indexToCells(index, mx, my);
+    const long mx = static_cast<long>(index % g.size_x), my = static_cast<long>(index / g.size_x);
     for (int dy = -gap; dy <= gap; ++dy)
     {
       for (int dx = -gap; dx <= gap; ++dx)
       {
-        const long x = static_cast<long>(mx) + dx, y = static_cast<long>(my) + dy;
+        const long x = mx + dx, y = my + dy;
         if ((dx == 0 && dy == 0) || x < 0 || y < 0 || x >= static_cast<long>(g.size_x) ||
             y >= static_cast<long>(g.size_y))
         {
           continue;
         }
         const std::uint32_t n = g.getIndex(static_cast<unsigned int>(x), static_cast<unsigned int>(y));
-        if (obstacle.cells.isPresent(n) || std::find(grown.begin(), grown.end(), n) != grown.end())
+        if (obstacle.cells.isPresent(n) || grown_set.count(n) != 0)
         {
           return true;
         }
@@ -1015,26 +1064,18 @@ void SharingCore::growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>&
     }
     return false;
   };
-  // Chains: a cell touching one just taken is taken too, until nothing more touches.
-  std::vector<std::uint32_t> left;
-  for (std::uint32_t index : shareable_)
-  {
-    const auto found = memory_.find(index);
-    if (found != memory_.end() && found->second.marks >= params_.clearing_scans &&
-        found->second.time - found->second.marked_since >= params_.clearing_time)
-    {
-      left.push_back(index);
-    }
-  }
+  // Chains: a cell touching one just taken is taken too, until nothing more touches. A cell taken here is
+  // this obstacle's: it leaves `steady` for the obstacles after it.
   for (bool taken = true; taken;)
   {
     taken = false;
-    for (auto it = left.begin(); it != left.end();)
+    for (auto it = steady.begin(); it != steady.end();)
     {
       if (touches(*it))
       {
         grown.push_back(*it);
-        it = left.erase(it);
+        grown_set.insert(*it);
+        it = steady.erase(it);
         taken = true;
       }
       else

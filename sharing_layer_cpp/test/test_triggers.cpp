@@ -110,7 +110,7 @@ TEST(UnknownMap, CellsInOrNearUnknownMapAreasAreNeverShared)
 
 TEST(UnknownMap, ToleranceAroundUnknownAndSizeChecks)
 {
-  SharingCore core(grid(), defaults());  // static_tolerance 2
+  SharingCore core(grid(), defaults());  // static_tolerance 3
   const GridGeometry g = grid();
   std::vector<std::uint8_t> unknown(g.cellCount(), 0);
   unknown[g.getIndex(100, 100)] = 1;
@@ -122,9 +122,10 @@ TEST(UnknownMap, ToleranceAroundUnknownAndSizeChecks)
     obs.points.push_back(Point3{ x * 0.05 + 0.025, 5.025, 0.3 });
   }
   core.processScan(obs, 1.0);
-  // Cells 98..102 are within 2 cells of the unknown cell 100; 103..106 are shareable.
+  // Cells 98..103 are within 3 cells of the unknown cell 100; 104..106 are shareable.
+  ASSERT_EQ(3, defaults().static_tolerance);
   std::vector<std::uint32_t> expected;
-  for (unsigned int x = 103; x <= 106; ++x)
+  for (unsigned int x = 104; x <= 106; ++x)
   {
     expected.push_back(g.getIndex(x, 100));
   }

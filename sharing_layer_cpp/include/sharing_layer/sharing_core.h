@@ -272,7 +272,12 @@ private:
   /// clearing_time (the evidence that clears a cell, mirrored), which needs the trigger memory (trigger_memory > 0). A block first seen in part (the plan trigger fires on its first cells) ends
   /// whole in the fleet as the robot sees more of it, instead of its rest waiting for a trigger that may
   /// never come (navfn's detour no longer runs into it).
-  void growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& marked);
+  void growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& steady, std::vector<std::uint32_t>& marked);
+  /// @brief Shareable cells marked steadily (the candidates of growInto; those it takes leave the list); also
+  /// flags them in steady_flag_, which processScan resets.
+  std::vector<std::uint32_t> steadyShareable();
+  /// @return whether a flagged steady cell lies within gap cells around the rectangle, outside it
+  bool steadyInRing(const CellRect& rect, int gap) const;
   /// @brief Cells inside a new or grown rectangle stop being this robot's candidates: monitoring has them.
   void dropShareableInside(const CellRect& rect);
 
@@ -293,6 +298,7 @@ private:
   std::vector<std::uint32_t> shareable_;
   std::vector<std::uint8_t> is_shareable_;
   std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
+  std::vector<std::uint8_t> steady_flag_;  ///< per cell: a growth candidate of the current scan (else 0)
   std::map<std::string, SharedObstacle> shared_;
   WorldBounds dirty_;
 };
