@@ -92,8 +92,10 @@ public:
   static std::vector<std::uint32_t> rasterize(const GridGeometry& geometry,
                                               const std::vector<std::pair<double, double>>& footprint, double margin);
 
-private:
+  /// @brief What update() refuses: @throws std::invalid_argument naming the robot and the fault
   static void check(const FleetRobot& robot);
+
+private:
   void count(const std::vector<std::uint32_t>& cells, int delta);
 
   GridGeometry geometry_;
