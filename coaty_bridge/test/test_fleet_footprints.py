@@ -39,6 +39,8 @@ def test_object_round_trip_and_shape():
     assert fp.footprint_from_object(json.loads(json.dumps(obj))) == value
     payload = json.loads(fp.footprint_payload(value, object_id))
     assert fp.decode_footprint_advertise(payload) == value
+    # coordinates travel in millimetres (the layers' cells are centimetres)
+    assert fp.footprint_to_object(make(points=((1.23456789, -0.0004),)), object_id)["footprint"] == [[1.235, -0.0]]
     # JS writes 2.0 as 2: integers are numbers too
     assert fp.footprint_from_object(good_object(footprint=[[1, 2], [2, 2], [2, 3]], stamp=5)).points == \
         ((1.0, 2.0), (2.0, 2.0), (2.0, 3.0))

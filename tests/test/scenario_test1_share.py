@@ -1,14 +1,18 @@
 #!/usr/bin/python3
 """Test 1 of the thesis (DESIGN.md §8), node of test1_share.test: share and react.
 
-robot_0 drives to the orange goal behind both blocks: it gets stuck once at each block, each
-block is shared once, and it reaches the goal through the open (left) corridor. robot_1, sent
-afterwards to the purple goal behind the same blocks, plans the open route from the start: no
-stuck event, no plan or pose of it inside a blocked corridor. robot_1, which robot_0 sees at the
-start, is never shared. At the end both robots hold the same obstacle list.
+robot_1 first drives to wait_1, beside the mouth of the right corridor. robot_0 then drives to the
+orange goal behind both blocks: it gets stuck once at each block, each block is shared once, and it
+reaches the goal through the open (left) corridor. robot_1 stands within obstacle_range of robot_0
+and in its laser's view when robot_0 shares block_right, so its cells are shareable there; it is
+never shared, because robot_0's layer knows it from robot_1's footprint advert (DESIGN.md §6,
+"fleet robots are never obstacles"). robot_1, sent afterwards to the purple goal behind the same
+blocks, plans the open route from the start: no stuck event, no plan or pose of it inside a blocked
+corridor. At the end both robots hold the same obstacle list.
 """
 import math
 
+import rospy
 import rostest
 
 from fleet_tests.scenario import cell_centre, entered, inside
@@ -24,14 +28,31 @@ class Test1Share(FleetTestCase):
         r0, r1 = fleet.robots
         blocks = fleet.facility["blocks"]
         blocked = {name: fleet.corridor(b["corridor"]) for name, b in blocks.items()}
-        r1_start = r1.pose
+        obstacle_range = float(rospy.get_param("/robot_0/move_base/global_costmap/obstacle_range", 2.5))
 
+        self.assert_succeeded(r1, "wait_1", r1.go("wait_1", 120.0))
+        fleet.wait_until(lambda: "robot_1" in r0.fleet_robot_names(), 20.0, "robot_0's bridge to hear robot_1")
         self.assert_succeeded(r0, "orange", r0.go("orange", 300.0))
 
         # Stuck once at each block, each block shared once (and nothing else shared).
         self.assertEqual(len(blocks), len(r0.stuck), "robot_0 stuck events %s, expected one per block" % r0.stuck)
         shares = r0.shares()
         rects = [tuple(m.rectangle_shape) for _t, m in shares]
+        # robot_1 stood within obstacle_range of robot_0 when it shared block_right (else the next check
+        # could not fail), and is never shared: no shared cell near where it stood.
+        self.assertTrue(shares, "robot_0 shared nothing")
+        first_t = shares[0][0]
+        p0, p1 = r0.pose_at(first_t), r1.pose_at(first_t)
+        self.assertLess(math.hypot(p0[0] - p1[0], p0[1] - p1[1]), obstacle_range - 0.3,
+                        "robot_1 at (%.2f, %.2f) was not within obstacle_range %.1f m of robot_0 at (%.2f, %.2f) "
+                        "when it shared" % (p1[0], p1[1], obstacle_range, p0[0], p0[1]))
+        for t, m in shares:
+            x1, y1 = r1.pose_at(t)
+            for i in m.marked_indexes:
+                x, y = cell_centre(m, i)
+                self.assertGreater(math.hypot(x - x1, y - y1), 0.6,
+                                   "robot_0 shared robot_1 (cell (%.2f, %.2f) of %s; robot_1 at (%.2f, %.2f))"
+                                   % (x, y, m.uuid, x1, y1))
         self.assertEqual(len(blocks), len(shares), "robot_0 shared %d obstacles %s, expected one per block"
                          % (len(shares), rects))
         for name, b in blocks.items():
@@ -43,12 +64,6 @@ class Test1Share(FleetTestCase):
             self.assertEqual(1, len(near), "block %s: %d shares lie on it (rectangles %s)" % (name, len(near), rects))
             stuck_near = [s for s in r0.stuck if abs(s[1] - bx) < 1.5 and by - 3.0 < s[2] < by]
             self.assertEqual(1, len(stuck_near), "robot_0 stuck %s, expected once below %s" % (r0.stuck, name))
-        # robot_1 is never shared: no shared cell near where it stands.
-        for _t, m in shares:
-            for i in m.marked_indexes:
-                x, y = cell_centre(m, i)
-                self.assertGreater(math.hypot(x - r1_start[0], y - r1_start[1]), 0.6,
-                                   "robot_0 shared robot_1 (cell (%.2f, %.2f) of %s)" % (x, y, m.uuid))
         # The open route: robot_0 went through the left corridor and never past a block.
         self.assertTrue(entered(r0.track, fleet.corridor("left")), "robot_0 never drove the left corridor")
         for name, b in blocks.items():

@@ -97,7 +97,8 @@ def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJE
         "robot": footprint.robot,
         "stamp": footprint.stamp,
         "frameId": footprint.frame_id,
-        "footprint": [[x, y] for x, y in footprint.points],
+        # millimetres: the layers' cells are centimetres wide, and full float64 digits double the bytes
+        "footprint": [[round(x, 3), round(y, 3)] for x, y in footprint.points],
     }
 
 
