@@ -230,3 +230,51 @@ def test_offline_footprints_are_not_queued():
     assert not client.publish_footprint(make(robot="robot_0"))
     assert client.counters()["footprints_not_sent_offline"] == 1 and client.counters()["queue_length"] == 0
     assert math.isclose(make().stamp, 1700000000.5)
+
+
+def test_a_late_older_advert_does_not_move_a_robot_back_but_a_restarted_clock_does():
+    clock = FakeClock()
+    table = fp.FleetRobotTable("robot_0", 3.0, clock)
+    new, old = make(stamp=50.0, points=((5.0, 5.0),)), make(stamp=49.5, points=((1.0, 1.0),))
+    assert table.heard(new) and not table.heard(old)
+    assert table.robots()[0].footprint == new
+    restarted = make(stamp=1.0, points=((2.0, 2.0),))   # 49 s older: a new simulation, not a late advert
+    assert table.heard(restarted) and table.robots()[0].footprint == restarted
+
+
+# ----------------------------------------------------- convergence of the exclusion (hypothesis)
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@st.composite
+def deliveries(draw):
+    """Adverts of up to 3 robots (0.5 s apart in their stamps), each delivered 0-3 times (loss and
+    duplicates), in any order, over a short window (one broker bridge's worth of reordering)."""
+    adverts = []
+    for robot in ("robot_1", "robot_2", "robot_3")[:draw(st.integers(1, 3))]:
+        for k in range(draw(st.integers(1, 6))):
+            adverts.append(make(robot=robot, stamp=100.0 + 0.5 * k, points=((float(k), float(len(robot))),)))
+    copies = [a for a in adverts for _ in range(draw(st.integers(0, 3)))]
+    return draw(st.permutations(copies))
+
+
+@settings(max_examples=600, deadline=None)
+@given(deliveries())
+def test_every_order_of_adverts_keeps_the_newest_footprint_per_robot(delivered):
+    """Whatever the order, duplication and loss, a bridge lists for each robot the newest footprint
+    that reached it, so every layer excludes the cells where that robot stands now (and two bridges
+    that got the same adverts in different orders list the same robots)."""
+    clock = FakeClock()
+    one, other = fp.FleetRobotTable("robot_0", 3.0, clock), fp.FleetRobotTable("robot_9", 3.0, clock)
+    for advert in delivered:
+        one.heard(advert)
+    for advert in reversed(delivered):
+        other.heard(advert)
+    newest = {}
+    for advert in delivered:
+        if advert.robot not in newest or advert.stamp > newest[advert.robot].stamp:
+            newest[advert.robot] = advert
+    expected = [newest[name] for name in sorted(newest)]
+    assert [r.footprint for r in one.robots()] == expected
+    assert [r.footprint for r in other.robots()] == expected

@@ -163,8 +163,14 @@ class FleetRobotTable:
         self._robots: Dict[str, HeardRobot] = {}
 
     def heard(self, footprint):
-        """Records an advert; returns False (and keeps nothing) for the own robot's name."""
+        """Records an advert; returns False (and keeps nothing) for the own robot's name and for an
+        advert older (by its stamp) than the one held, which a reordering path (a broker bridge, a
+        reconnect) delivered late. A stamp more than timeout older is a robot whose clock restarted
+        (a new simulation): that one is taken."""
         if footprint.robot == self.own_robot:
+            return False
+        held = self._robots.get(footprint.robot)
+        if held is not None and held.footprint.stamp - self.timeout <= footprint.stamp < held.footprint.stamp:
             return False
         robots = dict(self._robots)
         robots[footprint.robot] = HeardRobot(footprint, self._clock())

@@ -232,7 +232,9 @@ class BridgeNode:
     def _on_fleet_footprint(self, footprint, topic):
         """MQTT thread: a peer's footprint advert (already validated)."""
         known = footprint.robot in {r.footprint.robot for r in self.fleet.robots()}
-        if self.fleet.heard(footprint) and not known:
+        if footprint.robot != self.config.robot_name and not self.fleet.heard(footprint):
+            self._count("footprints_out_of_order")
+        elif not known and footprint.robot != self.config.robot_name:
             rospy.loginfo("%s: fleet robot %s heard (sourceId %s); its footprint is never shared",
                           self.config.robot_name, footprint.robot, topic.source_id)
 
