@@ -7,6 +7,9 @@ JSON line {"event": "from_fleet", "robot": ..., "msg": {...}}. Commands, one JSO
 object per stdin line:
   {"cmd": "to_fleet", "robot": r, "msg": {...}}   publish on <robot>/to_fleet
   {"cmd": "list", "robot": r, "msgs": [...]}      publish <robot>/shared_obstacle_list (latched)
+  {"cmd": "footprint", "robot": r, "frame_id": f, "points": [[x, y], ...], "stamp": s}
+                                                  publish <robot>/move_base/global_costmap/footprint
+It also prints every <robot>/fleet_robots as {"event": "fleet_robots", "robot": r, "robots": [...]}.
 Publishing waits until the bridge is subscribed, then prints {"event": "sent"}.
 """
 import json
@@ -15,7 +18,8 @@ import threading
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
-from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from geometry_msgs.msg import Point32, PolygonStamped
+from sharing_msgs.msg import RobotFootprintArray, SharedObstacle, SharedObstacleArray
 
 FIELDS = ("uuid", "marked_indexes", "cleared_indexes", "deadline", "rectangle_shape", "source",
           "resolution", "origin_x", "origin_y", "size_x", "size_y", "version")
@@ -59,8 +63,14 @@ def wait_connected(publisher):
 def main():
     rospy.init_node("bridge_probe", anonymous=True, disable_signals=True)
     robots = sys.argv[1:]
-    to_fleet, lists = {}, {}
+    to_fleet, lists, footprints = {}, {}, {}
     for robot in robots:
+        rospy.Subscriber("/%s/fleet_robots" % robot, RobotFootprintArray, lambda msg, r=robot: emit(
+            {"event": "fleet_robots", "robot": r, "robots": [
+                {"robot": f.robot, "frame_id": f.header.frame_id, "stamp": f.header.stamp.to_sec(),
+                 "points": [[p.x, p.y] for p in f.footprint.points]} for f in msg.robots]}))
+        footprints[robot] = rospy.Publisher("/%s/move_base/global_costmap/footprint" % robot, PolygonStamped,
+                                            queue_size=10)
         rospy.Subscriber("/%s/from_fleet" % robot, SharedObstacle,
                          lambda msg, r=robot: emit({"event": "from_fleet", "robot": r, "msg": to_dict(msg)}))
         to_fleet[robot] = rospy.Publisher("/%s/to_fleet" % robot, SharedObstacle, queue_size=10)
@@ -76,6 +86,14 @@ def main():
             publisher = to_fleet[cmd["robot"]]
             connected = wait_connected(publisher)
             publisher.publish(from_dict(cmd["msg"]))
+            emit({"event": "sent", "connected": connected})
+        elif cmd["cmd"] == "footprint":
+            msg = PolygonStamped()
+            msg.header.frame_id = cmd.get("frame_id", "map")
+            msg.header.stamp = rospy.Time.from_sec(cmd.get("stamp", 0.0))
+            msg.polygon.points = [Point32(float(x), float(y), 0.0) for x, y in cmd["points"]]
+            connected = wait_connected(footprints[cmd["robot"]])
+            footprints[cmd["robot"]].publish(msg)
             emit({"event": "sent", "connected": connected})
         elif cmd["cmd"] == "list":
             array = SharedObstacleArray(obstacles=[from_dict(m) for m in cmd["msgs"]])

@@ -1,17 +1,18 @@
 // A Coaty JS agent (@coaty/core 2.4.1) for the interop test of coaty_bridge.
-// Usage: node coaty_js_peer.js <brokerUrl> <namespace> <objectType>
+// Usage: node coaty_js_peer.js <brokerUrl> <namespace> <objectType> [<footprintObjectType>]
 // Reads one JSON command per line on stdin, writes one JSON event per line on stdout:
 //   {"cmd": "discoverIdentities"}       -> {"event": "identity", "object": ...} per Resolve
 //   {"cmd": "publish", "object": {...}} -> Advertise; the object also answers obstacle Discovers
+//   {"cmd": "publishFootprint", "object": {...}} -> Advertise of a robot footprint (not a Discover answer)
 //   {"cmd": "exit"}
 // Events: ready, advertise (objects of <objectType>, with compact index strings decoded),
-// deadvertise, discoverAnswered, error.
+// deadvertise, discoverAnswered, footprint (objects of <footprintObjectType>), error.
 "use strict";
 const readline = require("readline");
 const zlib = require("zlib");
 const { Container, MqttBinding, AdvertiseEvent, DiscoverEvent, ResolveEvent } = require("@coaty/core");
 
-const [brokerUrl, namespace, objectType] = process.argv.slice(2);
+const [brokerUrl, namespace, objectType, footprintType] = process.argv.slice(2);
 const emit = (event) => process.stdout.write(JSON.stringify(event) + "\n");
 const mine = [];
 
@@ -55,6 +56,10 @@ com.observeAdvertiseWithObjectType(objectType).subscribe(event => {
         marked: decodeIndexes(object.markedIndexes), cleared: decodeIndexes(object.clearedIndexes),
     });
 });
+if (footprintType) {
+    com.observeAdvertiseWithObjectType(footprintType).subscribe(
+        event => emit({ event: "footprint", object: event.data.object }));
+}
 com.observeDeadvertise().subscribe(event => emit({ event: "deadvertise", objectIds: event.data.objectIds }));
 com.observeDiscover().subscribe(event => {
     if (event.data.isObjectTypeCompatible(objectType)) {
@@ -76,6 +81,9 @@ lines.on("line", line => {
                 error => emit({ event: "error", message: String(error) }));
         } else if (cmd.cmd === "publish") {
             mine.push(cmd.object);
+            com.publishAdvertise(AdvertiseEvent.withObject(cmd.object));
+            emit({ event: "published", objectId: cmd.object.objectId });
+        } else if (cmd.cmd === "publishFootprint") {
             com.publishAdvertise(AdvertiseEvent.withObject(cmd.object));
             emit({ event: "published", objectId: cmd.object.objectId });
         } else if (cmd.cmd === "exit") {

@@ -9,6 +9,7 @@ import os
 import shutil
 import signal
 import subprocess
+import time
 import uuid as uuidlib
 
 import pytest
@@ -21,6 +22,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 CACHE = os.environ.get("FLEET_COATY_CACHE", os.path.expanduser("~/.cache/fleet-coaty-interop"))
 PACKAGES = ["@coaty/core@2.4.1", "rxjs@^6.6.7"]
 OT = "org.fleetsharing.SharedObstacle"
+FOOTPRINT_OT = "org.fleetsharing.RobotFootprint"
 NETWORK_ERRORS = ("ENOTFOUND", "EAI_AGAIN", "ECONNREFUSED", "ECONNRESET", "ETIMEDOUT", "ENETUNREACH",
                   "network", "proxy")
 
@@ -76,7 +78,7 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
         robot_0 = ros_graph.bridge("robot_0", *params)
         probe = ros_graph.probe("robot_0", "robot_1")
         peer = json_lines_process(
-            "coaty_js_peer", ["node", os.path.join(HERE, "coaty_js_peer.js"), broker.url, "fleet", OT],
+            "coaty_js_peer", ["node", os.path.join(HERE, "coaty_js_peer.js"), broker.url, "fleet", OT, FOOTPRINT_OT],
             env=dict(os.environ, NODE_PATH=os.path.join(coaty_js, "node_modules")), cwd=coaty_js)
         try:
             peer.expect(lambda e: e.get("event") == "ready", what="Coaty JS agent online")
@@ -121,6 +123,26 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
             assert msg["source"] == "js_peer" and msg["stamp"] == 1700000200.0
             assert not [e for e in probe.events if e.get("event") == "from_fleet" and e["msg"]["uuid"] == mine["uuid"]], \
                 "robot_0's own obstacle came back to it"
+
+            # (e) robot footprints: robot_0's advert reaches the Coaty JS peer as a valid CoatyObject, and
+            # a footprint the peer advertises (integers as JS writes them) is listed on robot_0/fleet_robots
+            square = [[1.0, 2.0], [1.5, 2.0], [1.5, 2.5], [1.0, 2.5]]
+            for _ in range(30):
+                probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square})
+                if [e for e in peer.events if e.get("event") == "footprint"]:
+                    break
+                time.sleep(0.1)
+            seen = peer.expect(lambda e: e.get("event") == "footprint", what="(e) robot_0's footprint at the peer")
+            assert seen["object"]["robot"] == "robot_0" and seen["object"]["footprint"] == square
+            assert seen["object"]["coreType"] == "CoatyObject" and seen["object"]["frameId"] == "map"
+            peer.send({"cmd": "publishFootprint", "object": {
+                "objectType": FOOTPRINT_OT, "coreType": "CoatyObject", "objectId": str(uuidlib.uuid4()),
+                "name": "RobotFootprint js_peer", "robot": "js_peer", "stamp": 1700000300, "frameId": "map",
+                "footprint": [[4, 4], [5, 4], [5, 5]]}})
+            listed = probe.expect(lambda e: e.get("event") == "fleet_robots" and e["robot"] == "robot_0" and
+                                  e["robots"], what="(e) the JS peer's footprint on robot_0/fleet_robots")
+            assert [(r["robot"], r["points"]) for r in listed["robots"]] == [
+                ("js_peer", [[4.0, 4.0], [5.0, 4.0], [5.0, 5.0]])]
 
             # (d) a bridge started late gets the obstacles already in the fleet: robot_0's
             # (from its shared_obstacle_list) and the JS peer's (the peer answers Discover too)

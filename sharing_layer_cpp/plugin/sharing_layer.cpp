@@ -4,8 +4,10 @@
 #include <cmath>
 #include <sstream>
 
+#include <geometry_msgs/TransformStamped.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/point_cloud2_iterator.h>
+#include <tf2/exceptions.h>
 
 PLUGINLIB_EXPORT_CLASS(sharing_layer::SharingLayer, costmap_2d::Layer)
 
@@ -121,10 +123,16 @@ void SharingLayer::onInitialize()
   std::string robot_name = ros::this_node::getNamespace();
   robot_name.erase(std::remove(robot_name.begin(), robot_name.end(), '/'), robot_name.end());
   private_nh.param("robot_name", params_.robot_name, robot_name.empty() ? std::string("robot") : robot_name);
+  // Fleet robots are never shared (issue 12, part 5).
+  private_nh.param("robot_exclusion_margin", fleet_params_.margin, 0.2);
+  private_nh.param("robot_timeout", fleet_params_.timeout, 3.0);
+  std::string fleet_robots_topic;
+  private_nh.param("fleet_robots_topic", fleet_robots_topic, std::string("fleet_robots"));
   try
   {
     params_.strategy = parseProposalStrategy(strategy);
     params_.validate();
+    fleet_params_.validate();
   }
   catch (const std::invalid_argument& e)
   {
@@ -151,6 +159,14 @@ void SharingLayer::onInitialize()
   {
     map_sub_ = robot_nh.subscribe(map_topic, 1, &SharingLayer::mapCallback, this);
   }
+  if (!fleet_robots_topic.empty() && fleet_robots_topic != "none")
+  {
+    fleet_robots_sub_ = robot_nh.subscribe(fleet_robots_topic, 2, &SharingLayer::fleetRobotsCallback, this);
+  }
+  ROS_INFO("SharingLayer %s (%s): fleet robots from [%s] are never shared (footprint + %.2f m, forgotten after "
+           "%.1f s)",
+           name_.c_str(), params_.robot_name.c_str(), fleet_robots_topic.c_str(), fleet_params_.margin,
+           fleet_params_.timeout);
   ROS_INFO("SharingLayer %s (%s): clearing after %u scans over %.1f s seen free %.2f m before the beam ends; "
            "trigger memory %.1f s within %.2f m; plan trigger on [%s] within %.2f m of the plan; unknown cells "
            "from [%s]",
@@ -176,7 +192,9 @@ void SharingLayer::rebuildCore()
     return;  // the static layer has no map yet; matchSize() calls again
   }
   core_.reset(new SharingCore(masterGeometry(), params_));
+  core_->fleetRobots().setParams(fleet_params_);
   applyUnknownMap();
+  applyFleetRobots();
   // LayeredCostmap::resizeMap() blanks the master before calling matchSize(); the static layer writes
   // its map into the master only in the next updateCosts(), before ours. Take the a-priori map there.
   static_pending_ = true;
@@ -302,6 +320,67 @@ void SharingLayer::applyUnknownMap()
   core_->setUnknownMap(unknown.data(), unknown.size());
   ROS_INFO("SharingLayer (%s): %zu cells of the a-priori map are unknown and never shared",
            params_.robot_name.c_str(), count);
+}
+
+void SharingLayer::fleetRobotsCallback(const sharing_msgs::RobotFootprintArray::ConstPtr& msg)
+{
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  fleet_robots_ = msg;
+  applyFleetRobots();
+}
+
+void SharingLayer::applyFleetRobots()
+{
+  if (!core_ || !fleet_robots_)
+  {
+    return;
+  }
+  std::vector<FleetRobot> robots;
+  for (const sharing_msgs::RobotFootprint& item : fleet_robots_->robots)
+  {
+    if (item.robot == params_.robot_name)
+    {
+      continue;  // this robot's own footprint is the footprint clearing's business
+    }
+    FleetRobot robot;
+    robot.name = item.robot;
+    robot.stamp = item.header.stamp.isZero() ? ros::Time::now().toSec() : item.header.stamp.toSec();
+    double tx = 0.0, ty = 0.0, yaw = 0.0;
+    std::string frame = item.header.frame_id;
+    if (!frame.empty() && frame[0] == '/')
+    {
+      frame.erase(0, 1);
+    }
+    try
+    {
+      if (!frame.empty() && frame != global_frame_)
+      {
+        const geometry_msgs::TransformStamped t = tf_->lookupTransform(global_frame_, frame, ros::Time(0));
+        const geometry_msgs::Quaternion& q = t.transform.rotation;
+        tx = t.transform.translation.x;
+        ty = t.transform.translation.y;
+        yaw = std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+      }
+      const double c = std::cos(yaw), s = std::sin(yaw);
+      for (const geometry_msgs::Point32& p : item.footprint.points)
+      {
+        robot.footprint.emplace_back(tx + c * p.x - s * p.y, ty + s * p.x + c * p.y);
+      }
+      FleetRobots::check(robot);
+      robots.push_back(std::move(robot));
+    }
+    catch (const tf2::TransformException& e)
+    {
+      ROS_WARN_THROTTLE(5.0, "SharingLayer (%s): ignoring fleet robot %s: cannot transform its footprint from %s to "
+                             "%s: %s",
+                        params_.robot_name.c_str(), item.robot.c_str(), frame.c_str(), global_frame_.c_str(), e.what());
+    }
+    catch (const std::invalid_argument& e)
+    {
+      ROS_WARN_THROTTLE(5.0, "SharingLayer (%s): ignoring fleet robot: %s", params_.robot_name.c_str(), e.what());
+    }
+  }
+  core_->fleetRobots().replaceAll(robots);  // all checked: cannot throw
 }
 
 void SharingLayer::handleTrigger(const TriggerReport& report, double now)

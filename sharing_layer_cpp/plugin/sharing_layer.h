@@ -11,6 +11,7 @@
 #include <nav_msgs/OccupancyGrid.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
+#include <sharing_msgs/RobotFootprintArray.h>
 #include <sharing_msgs/SharedObstacle.h>
 #include <std_msgs/Empty.h>
 #include <std_msgs/String.h>
@@ -28,7 +29,9 @@ namespace sharing_layer
  * move_base/recovery_status (any type: each message counts as a stuck signal), shared_obstacles
  * (sharing_msgs/SharedObstacle), expired_obstacles (std_msgs/String), the global plan (nav_msgs/Path,
  * ~plan_topics, default move_base/NavfnROS/plan and move_base/GlobalPlanner/plan) for the plan-blocked
- * trigger, and the a-priori map (nav_msgs/OccupancyGrid, ~map_topic, default map) for its unknown cells;
+ * trigger, the a-priori map (nav_msgs/OccupancyGrid, ~map_topic, default map) for its unknown cells, and
+ * the fleet robots its Coaty bridge hears (sharing_msgs/RobotFootprintArray, ~fleet_robots_topic, default
+ * fleet_robots), whose footprints plus ~robot_exclusion_margin are never shared;
  * publishes obstacle_proposals and obstacle_updates (sharing_msgs/SharedObstacle). Every trigger is logged
  * once at INFO with its source and what it proposed, or why nothing.
  */
@@ -53,6 +56,9 @@ private:
   void expiredCallback(const std_msgs::String::ConstPtr& msg);
   void planCallback(const nav_msgs::Path::ConstPtr& msg);
   void mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg);
+  void fleetRobotsCallback(const sharing_msgs::RobotFootprintArray::ConstPtr& msg);
+  /// @brief Hands the last fleet_robots message to the core, in the global frame; core_mutex_ held.
+  void applyFleetRobots();
   /// @brief Publishes a trigger's proposals and logs it; call with core_mutex_ held.
   void handleTrigger(const TriggerReport& report, double now);
   /// @brief Hands the unknown cells of the last map to the core, in the master's geometry; core_mutex_ held.
@@ -67,6 +73,8 @@ private:
   bool inscribed_from_footprint_ = true;  ///< ~inscribed_radius not set: follow the footprint
   TriggerSource stuck_source_ = TriggerSource::StuckFeedback;
   nav_msgs::OccupancyGrid::ConstPtr map_;  ///< last a-priori map, for its unknown cells
+  FleetRobotParams fleet_params_;          ///< robot_exclusion_margin, robot_timeout
+  sharing_msgs::RobotFootprintArray::ConstPtr fleet_robots_;  ///< last fleet_robots, re-applied to a new core
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
   /// Scans processed while static_pending_: their cells were judged shareable without the static map
   /// (walls too), so they are replayed once it is read. At most kMaxPreStaticScans, the newest.
@@ -82,6 +90,7 @@ private:
   ros::Subscriber expired_sub_;
   std::vector<ros::Subscriber> plan_subs_;
   ros::Subscriber map_sub_;
+  ros::Subscriber fleet_robots_sub_;
 };
 
 }  // namespace sharing_layer

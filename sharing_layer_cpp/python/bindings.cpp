@@ -21,6 +21,11 @@
 namespace py = pybind11;
 using namespace sharing_layer;
 
+namespace sharing_layer
+{
+void bindFleetRobots(py::module& m);  // bind_fleet_robots.cpp
+}
+
 namespace
 {
 using IndexArray = py::array_t<std::uint32_t, py::array::c_style | py::array::forcecast>;
@@ -379,6 +384,7 @@ PYBIND11_MODULE(_sharing_core, m)
       .def_property_readonly("height_filtered", [](const ScanOutcome& o) { return o.touch.height_filtered; })
       .def_readonly("updates", &ScanOutcome::updates);
 
+  bindFleetRobots(m);
   py::class_<SharingCore>(m, "SharingCore", "The sharing layer without ROS; times are seconds, passed in")
       .def(py::init<const GridGeometry&, const LayerParams&>(), py::arg("geometry"), py::arg("params"))
       .def_property_readonly("geometry", &SharingCore::geometry)
@@ -486,6 +492,9 @@ PYBIND11_MODULE(_sharing_core, m)
            },
            "The obstacle layer's grid as a (size_y, size_x) uint8 view (no copy)")
       .def("shareable_cells", [](const SharingCore& core) { return toArray(core.shareableCells()); })
+      .def_property_readonly("fleet_robots", py::overload_cast<>(&SharingCore::fleetRobots),
+                             py::return_value_policy::reference_internal,
+                             "The fleet robots whose footprints (plus margin) are never shared (FleetRobots)")
       .def("shared_uuids",
            [](const SharingCore& core) {
              std::vector<std::string> uuids;

@@ -125,12 +125,18 @@ const char* triggerReasonName(TriggerReason reason)
       return "already_shared";
     case TriggerReason::TooSmall:
       return "too_small";
+    case TriggerReason::FleetRobot:
+      return "fleet_robot";
   }
   return "unknown";
 }
 
 SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params)
-  : params_(params), trigger_(params.trigger_debounce), plan_trigger_(params.trigger_debounce), dirty_(emptyBounds())
+  : params_(params)
+  , trigger_(params.trigger_debounce)
+  , plan_trigger_(params.trigger_debounce)
+  , dirty_(emptyBounds())
+  , fleet_robots_(geometry)
 {
   last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();
   params_.validate();
@@ -220,6 +226,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   const double oy = observation.origin.y;
   const double view_radius = std::max(params_.limits.obstacle_range, params_.limits.raytrace_range);
   const bool origin_finite = std::isfinite(ox) && std::isfinite(oy);
+  fleet_robots_.expire(now_s);
 
   // Only obstacles this scan can reach are monitored; the rest cost one distance test each. Their present
   // cells and the remembered cells in reach are watched for evidence of free space.
@@ -339,9 +346,14 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     last_origin_y_ = oy;
   }
   last_static_marked_ = 0;
+  last_robot_marked_.clear();
   for (std::uint32_t index : outcome.touch.marked)
   {
     last_static_marked_ += static_filter_.isStatic(index);
+    if (fleet_robots_.excludes(index) && !static_filter_.isStatic(index))
+    {
+      last_robot_marked_.push_back(index);
+    }
   }
   last_new_marked_.clear();
   for (std::uint32_t index : not_lethal_before)
@@ -383,7 +395,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       for (auto it = std::lower_bound(marked_watched.begin(), marked_watched.end(), row_first);
            it != marked_watched.end() && *it <= row_last; ++it)
       {
-        if (static_filter_.isStatic(*it))
+        // Walls, and a fleet robot standing on the cell: neither new cells nor an observation of the obstacle.
+        if (static_filter_.isStatic(*it) || fleet_robots_.excludes(*it))
         {
           continue;
         }
@@ -480,7 +493,8 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   const float sy = static_cast<float>(observation.origin.y);
   for (std::uint32_t index : touch.marked)
   {
-    if (!static_filter_.isStatic(index))
+    // A cell marked on a fleet robot is not remembered: its trail must not be proposed once it drove on.
+    if (!static_filter_.isStatic(index) && !fleet_robots_.excludes(index))
     {
       RememberedCell& cell = memory_[index];
       if (cell.marks == 0)
@@ -500,7 +514,10 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
 {
   for (std::uint32_t index : touch.marked)
   {
-    if (!is_shareable_[index] && !static_filter_.isStatic(index) && !insideMonitoredRectangle(index))
+    // Cells marked on a fleet robot do not become shareable (nor stay so when it drives on); an obstacle
+    // beside it becomes shareable with the next scan that marks it after the robot left.
+    if (!is_shareable_[index] && !static_filter_.isStatic(index) && !insideMonitoredRectangle(index) &&
+        !fleet_robots_.excludes(index))
     {
       is_shareable_[index] = 1;
       shareable_.push_back(index);
@@ -529,9 +546,18 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
   shareable_.erase(keep_end, shareable_.end());
 }
 
-std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_y, bool use_memory) const
+std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_y, bool use_memory,
+                                                   bool with_robots) const
 {
-  std::vector<std::uint32_t> cells(shareable_);
+  std::vector<std::uint32_t> cells;
+  cells.reserve(shareable_.size());
+  for (std::uint32_t index : shareable_)
+  {
+    if (with_robots || !fleet_robots_.excludes(index))
+    {
+      cells.push_back(index);
+    }
+  }
   if (use_memory && !memory_.empty() && std::isfinite(robot_x) && std::isfinite(robot_y))
   {
     const GridGeometry& g = geometry();
@@ -541,7 +567,8 @@ std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_
     for (const auto& entry : memory_)
     {
       const std::uint32_t index = entry.first;
-      if (is_shareable_[index] || insideMonitoredRectangle(index) || static_filter_.isStatic(index))
+      if (is_shareable_[index] || insideMonitoredRectangle(index) || static_filter_.isStatic(index) ||
+          (!with_robots && fleet_robots_.excludes(index)))
       {
         continue;
       }
@@ -631,7 +658,32 @@ void SharingCore::explainNothing(TriggerReport& report, double robot_x, double r
       nearest = std::min(nearest, d);
     }
   }
-  if (!use_memory && candidates(robot_x, robot_y, true).size() > shareable_.size())
+  // Cells on fleet robots are neither shareable nor remembered: the last scan's marks on them explain it.
+  std::vector<std::uint32_t> with_robots = candidates(robot_x, robot_y, use_memory, true);
+  with_robots.insert(with_robots.end(), last_robot_marked_.begin(), last_robot_marked_.end());
+  if (!with_robots.empty() && candidates(robot_x, robot_y, use_memory).empty())
+  {
+    std::vector<std::string> names;
+    for (std::uint32_t index : with_robots)
+    {
+      for (std::string& name : fleet_robots_.robotsAt(index))
+      {
+        names.push_back(std::move(name));
+      }
+    }
+    std::sort(names.begin(), names.end());
+    names.erase(std::unique(names.begin(), names.end()), names.end());
+    std::string list;
+    for (const std::string& name : names)
+    {
+      list += (list.empty() ? "" : ", ") + name;
+    }
+    report.reason = TriggerReason::FleetRobot;
+    report.message += "nothing proposed: the cells marked near the robot lie within the footprint of fleet "
+                      "robot(s) " + list +
+                      format(" (plus robot_exclusion_margin %.2f m)", fleet_robots_.params().margin, 0.0);
+  }
+  else if (!use_memory && candidates(robot_x, robot_y, true).size() > shareable_.size())
   {
     report.reason = TriggerReason::OutOfRange;
     report.message += format("nothing proposed: the recently marked cells near the robot lie beyond obstacle_range "
@@ -693,6 +745,7 @@ TriggerReport SharingCore::trigger(TriggerSource source, double now_s, double ro
     report.message += "ignored: time or robot pose not finite";
     return report;
   }
+  fleet_robots_.expire(now_s);
   if (!trigger_.signal(now_s))
   {
     report.reason = TriggerReason::Debounced;
@@ -805,6 +858,7 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
   {
     return report;
   }
+  fleet_robots_.expire(now_s);
   const std::vector<std::size_t> ahead =
       planAhead(robot_x, robot_y, params_.limits.obstacle_range + params_.inscribed_radius);
   if (ahead.empty())
@@ -826,7 +880,8 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
     g.indexToCells(index, mx, my);
     double wx = 0.0, wy = 0.0;
     g.mapToWorld(mx, my, wx, wy);
-    if ((wx - from_x) * (wx - from_x) + (wy - from_y) * (wy - from_y) > range_sq || !nearPlan(index, ahead))
+    if ((wx - from_x) * (wx - from_x) + (wy - from_y) * (wy - from_y) > range_sq || !nearPlan(index, ahead) ||
+        fleet_robots_.excludes(index))  // a fleet robot on the plan is not an obstacle to share
     {
       continue;
     }
@@ -1167,6 +1222,7 @@ void SharingCore::resetObstacleLayer()
   memory_.clear();
   last_new_marked_.clear();
   last_static_marked_ = 0;
+  last_robot_marked_.clear();
   last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();
 }
 

@@ -119,3 +119,16 @@ def test_missing_world_stops_the_launch_naming_the_file(tmp_path):
     out = proc.stdout + proc.stderr
     assert re.search(r"fleet_sim cannot start: .*no_such\.world: cannot read world file", out), out
     assert re.search(r"REQUIRED process \[fleet_sim-\d+\] has died", out), out
+
+
+def test_fleet_robot_exclusion_is_wired():
+    """Each bridge advertises the footprint fleet_nav publishes (issue 12, part 5: robots are never
+    shared); the layer keeps its defaults (robot_exclusion_margin 0.2 m, robot_timeout 3 s)."""
+    proc = subprocess.run(["roslaunch", "--dump-params", "fleet_launch", "fleet.launch", "robots:=2"],
+                          capture_output=True, text=True, env=ENV, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    for i in range(2):
+        assert "/robot_%d/coaty_bridge/footprint_topic: move_base/global_costmap/footprint" % i in out, out
+        assert "/robot_%d/coaty_bridge/robot_timeout: 3.0" % i in out
+        assert "robot_exclusion_margin" not in out, "the fleet launch should not override the layer's defaults"

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import paho.mqtt.client as mqtt
 
-from coaty_bridge import codec, lifetimes
+from coaty_bridge import codec, footprint as footprints, lifetimes
 from coaty_bridge.errors import CoatyError, ForgedSourceError
 from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
@@ -60,6 +60,7 @@ class BridgeConfig:
     broker_url: str = "mqtt://127.0.0.1:1883"
     namespace: str = "fleet"
     object_type: str = codec.DEFAULT_OBJECT_TYPE
+    footprint_object_type: str = footprints.DEFAULT_FOOTPRINT_OBJECT_TYPE
     identity_id: str = ""
     tls_ca: str = ""
     tls_cert: str = ""
@@ -80,13 +81,17 @@ class BridgeConfig:
     def __post_init__(self):
         def fail(name, why):
             raise ValueError("parameter %s = %r: %s" % (name, getattr(self, name), why))
-        for name in ("robot_name", "namespace", "object_type"):
+        for name in ("robot_name", "namespace", "object_type", "footprint_object_type"):
             try:
                 check_name(getattr(self, name), name)
             except CoatyError as err:
                 fail(name, err)
         if self.object_type.startswith("coaty."):
             fail("object_type", "the coaty.* object types are reserved")
+        if self.footprint_object_type.startswith("coaty."):
+            fail("footprint_object_type", "the coaty.* object types are reserved")
+        if self.footprint_object_type == self.object_type:
+            fail("footprint_object_type", "must differ from object_type")
         if not isinstance(self.authenticate_sources, bool):
             fail("authenticate_sources", "must be true or false")
         if self.identity_id:
@@ -154,10 +159,13 @@ class CoatyBridgeClient:
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
 
-    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0):
+    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0, on_footprint=None):
         self.config = config
         self.identity_id = config.identity_id
         self._on_obstacle = on_obstacle
+        # on_footprint(RobotFootprint, topic): a peer robot's footprint advert (fleet robots are never shared)
+        self._on_footprint = on_footprint
+        self.footprint_object_id = new_uuid()
         self._clock = clock
         self._qos = qos
         self._lock = threading.Lock()
@@ -177,9 +185,11 @@ class CoatyBridgeClient:
         ns = config.namespace
         self._identity = codec.identity_object(self.identity_id, config.robot_name)
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
+        self._footprint_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.footprint_object_type))
         self._dad_topic = str(Topic(ns, "DAD", self.identity_id))
         self._subscriptions = [
             (subscription(ns, "ADV::" + config.object_type), qos),
+            (subscription(ns, "ADV::" + config.footprint_object_type), qos),
             (subscription(ns, "DSC", two_way=True), qos),
             (subscription(ns, "RSV", two_way=True), qos),
         ]
@@ -263,6 +273,22 @@ class CoatyBridgeClient:
         self._count("bytes_published", len(payload))
         self._log_own(update)
         self._send(self._obstacle_topic, payload, update=update)
+        return True
+
+    def publish_footprint(self, footprint):
+        """Advertises this robot's footprint (a RobotFootprint). Not queued while offline: an old
+        pose is worth nothing. Returns False when it was not sent."""
+        payload = footprints.footprint_payload(footprint, self.footprint_object_id,
+                                               self.config.footprint_object_type)
+        if len(payload) > self.config.max_payload_bytes:
+            self._count("dropped_outgoing.oversized")
+            return False
+        if not self._connected:
+            self._count("footprints_not_sent_offline")
+            return False
+        self._count("footprints_published")
+        self._count("footprint_bytes_published", len(payload))
+        self._send(self._footprint_topic, payload, queue=False)
         return True
 
     def _log_own(self, update):
@@ -410,6 +436,9 @@ class CoatyBridgeClient:
             data = codec.parse_payload(payload, self.config.limits)
             if topic.event == "ADV" and topic.object_type == self.config.object_type:
                 self._deliver(codec.decode_advertise(data, self.config.object_type, self.config.limits), topic)
+            elif topic.event == "ADV" and topic.object_type == self.config.footprint_object_type:
+                self._deliver_footprint(
+                    footprints.decode_footprint_advertise(data, self.config.footprint_object_type), topic)
             elif topic.event == "DSC":
                 self._answer_discover(topic, codec.decode_discover(data, self.identity_id,
                                                                    self.config.object_type))
@@ -454,6 +483,26 @@ class CoatyBridgeClient:
             self._count("dropped.delivery_error")
             LOG.error("%s: could not deliver obstacle %s v%d from %s: %s: %s", self.config.robot_name,
                       update.uuid, update.version, update.source, type(err).__name__, err)
+
+    def _deliver_footprint(self, footprint, topic):
+        if self.config.authenticate_sources and topic.source_id != identity_for(self.config.namespace,
+                                                                                footprint.robot):
+            self._drop(ForgedSourceError("footprint of %r was sent by %s, not by that robot's identity"
+                                         % (footprint.robot, topic.source_id)), str(topic), b"")
+            return
+        if footprint.robot == self.config.robot_name:
+            # another agent under our name (or a replay of ours): this robot is not a fleet robot to itself
+            self._count("footprints_own_name")
+            return
+        self._count("footprints_received")
+        if self._on_footprint is None:
+            return
+        try:
+            self._on_footprint(footprint, topic)
+        except Exception as err:
+            self._count("dropped.delivery_error")
+            LOG.error("%s: could not deliver the footprint of %s: %s: %s", self.config.robot_name,
+                      footprint.robot, type(err).__name__, err)
 
     def _answer_discover(self, topic, request):
         ns = self.config.namespace

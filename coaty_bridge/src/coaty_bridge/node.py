@@ -3,6 +3,8 @@
     to_fleet (SharedObstacle)               -> Advertise to the fleet
     fleet (Advertise / Resolve)             -> from_fleet (SharedObstacle)
     shared_obstacle_list (SharedObstacleArray, latched) -> answers to obstacle Discovers
+    move_base/global_costmap/footprint (PolygonStamped) -> Advertise of this robot's footprint, 2 Hz
+    fleet (footprint Advertise)             -> fleet_robots (RobotFootprintArray, latched, 2 Hz)
     /diagnostics                            <- counters, once a second
 """
 import logging
@@ -11,18 +13,20 @@ import threading
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from geometry_msgs.msg import Point32, PolygonStamped
+from sharing_msgs.msg import RobotFootprint, RobotFootprintArray, SharedObstacle, SharedObstacleArray
 from sharing_msgs import safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
+from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue
 
 LOG = logging.getLogger(__name__)
 
 # private parameter -> BridgeConfig field default; the types are checked by BridgeConfig
-_PARAMS = ("broker_url", "namespace", "object_type", "identity_id", "tls_ca", "tls_cert",
+_PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
            "reconnect_max_delay", "discover_window", "authenticate_sources")
@@ -75,6 +79,52 @@ class RosoutHandler(logging.Handler):
             rospy.logdebug(text)
 
 
+class FootprintConfig:
+    """The node's footprint parameters (fleet robots are never shared); ValueError names a bad one."""
+
+    def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True):
+        if not isinstance(topic, str) or not topic:
+            raise ValueError("parameter footprint_topic = %r: must be a topic name" % (topic,))
+        for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
+                raise ValueError("parameter %s = %r: must be %g..%g" % (name, value, low, high))
+        if not isinstance(advertise, bool):
+            raise ValueError("parameter advertise_footprint = %r: must be true or false" % (advertise,))
+        if robot_timeout * rate < 2.0:
+            raise ValueError("parameter robot_timeout = %r: shorter than two adverts at footprint_rate %r Hz; a "
+                             "robot would be forgotten between adverts" % (robot_timeout, rate))
+        self.topic, self.rate, self.robot_timeout, self.advertise = topic, float(rate), float(robot_timeout), advertise
+
+    @classmethod
+    def from_params(cls):
+        return cls(topic=rospy.get_param("~footprint_topic", "move_base/global_costmap/footprint"),
+                   rate=rospy.get_param("~footprint_rate", 2.0),
+                   robot_timeout=rospy.get_param("~robot_timeout", 3.0),
+                   advertise=rospy.get_param("~advertise_footprint", True))
+
+
+def polygon_to_footprint(msg, robot, now):
+    """PolygonStamped (this robot's footprint at its pose) -> validated RobotFootprint; a zero stamp
+    means now. ValueError (a CoatyError) names the bad field."""
+    stamp = msg.header.stamp.to_sec() if not msg.header.stamp.is_zero() else now
+    return FootprintValue(robot=robot, stamp=stamp, frame_id=msg.header.frame_id.lstrip("/"),
+                          points=tuple((float(p.x), float(p.y)) for p in msg.polygon.points))
+
+
+def fleet_robots_message(heard, now):
+    """The known fleet robots as a RobotFootprintArray; each robot's stamp is when it was heard."""
+    array = RobotFootprintArray()
+    array.header.stamp = rospy.Time.from_sec(now)
+    for item in heard:
+        robot = RobotFootprint()
+        robot.header.stamp = rospy.Time.from_sec(max(0.0, item.heard_at))
+        robot.header.frame_id = item.footprint.frame_id
+        robot.robot = item.footprint.robot
+        robot.footprint.points = [Point32(x, y, 0.0) for x, y in item.footprint.points]
+        array.robots.append(robot)
+    return array
+
+
 def default_robot_name():
     return rospy.get_namespace().strip("/").replace("/", "_")
 
@@ -113,19 +163,26 @@ def wait_for_param(name, timeout):
 class BridgeNode:
     """Callbacks only convert and hand over; the logic lives in CoatyBridgeClient."""
 
-    def __init__(self, config):
+    def __init__(self, config, footprint_config=None):
         self.config = config
+        self.footprint_config = footprint_config or FootprintConfig()
         self._lock = threading.Lock()
         self._counters = {}
+        self._own_footprint = None   # (RobotFootprint, ROS time it arrived)
+        self._stale_logged = False
+        self.fleet = FleetRobotTable(config.robot_name, self.footprint_config.robot_timeout, rospy.get_time)
         # A message that cannot be delivered is dropped there; the publisher stays usable.
         self.from_fleet = SafePublisher(
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
             topic="%s/from_fleet" % config.robot_name)
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
-        self.client = CoatyBridgeClient(config, self._on_fleet_obstacle)
+        self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint)
+        self.fleet_robots = rospy.Publisher("fleet_robots", RobotFootprintArray, queue_size=2, latch=True)
         rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
         rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self._on_obstacle_list, queue_size=2)
+        rospy.Subscriber(self.footprint_config.topic, PolygonStamped, self._on_own_footprint, queue_size=10)
         self._timer = rospy.Timer(rospy.Duration(1.0), self._publish_diagnostics)
+        self._footprint_timer = rospy.Timer(rospy.Duration(1.0 / self.footprint_config.rate), self._footprint_tick)
 
     def start(self, subscriber_wait):
         """Connects to the fleet once from_fleet has a subscriber (or after ``subscriber_wait``
@@ -145,6 +202,7 @@ class BridgeNode:
 
     def shutdown(self):
         self._timer.shutdown()
+        self._footprint_timer.shutdown()
         self.client.stop()
 
     def _count(self, key):
@@ -160,6 +218,46 @@ class BridgeNode:
             self.from_fleet.drop("conversion", what, err)
             return
         self.from_fleet.publish(msg, what)
+
+    def _on_own_footprint(self, msg):
+        try:
+            footprint = polygon_to_footprint(msg, self.config.robot_name, rospy.get_time())
+        except ValueError as err:
+            self._count("dropped_own_footprint")
+            rospy.logwarn_throttle(5.0, "%s: footprint on %s not advertised: %s" % (
+                self.config.robot_name, self.footprint_config.topic, err))
+            return
+        self._own_footprint = (footprint, rospy.get_time())
+
+    def _on_fleet_footprint(self, footprint, topic):
+        """MQTT thread: a peer's footprint advert (already validated)."""
+        known = footprint.robot in {r.footprint.robot for r in self.fleet.robots()}
+        if footprint.robot != self.config.robot_name and not self.fleet.heard(footprint):
+            self._count("footprints_out_of_order")
+        elif not known and footprint.robot != self.config.robot_name:
+            rospy.loginfo("%s: fleet robot %s heard (sourceId %s); its footprint is never shared",
+                          self.config.robot_name, footprint.robot, topic.source_id)
+
+    def _footprint_tick(self, _event=None):
+        """At footprint_rate: advertise this robot's footprint while it is fresh, forget silent fleet
+        robots, publish the fleet robots for the layer."""
+        now = rospy.get_time()
+        own = self._own_footprint
+        if self.footprint_config.advertise and own is not None:
+            age = now - own[1]
+            if 0.0 <= age <= self.footprint_config.robot_timeout:
+                self.client.publish_footprint(own[0])
+                self._stale_logged = False
+            elif not self._stale_logged:
+                self._stale_logged = True
+                self._count("footprint_stale")
+                rospy.logwarn("%s: no footprint on %s for %.1f s; not advertising an old pose",
+                              self.config.robot_name, self.footprint_config.topic, age)
+        for name in self.fleet.expire():
+            self._count("fleet_robots_forgotten")
+            rospy.loginfo("%s: fleet robot %s forgotten: not heard for robot_timeout %.1f s",
+                          self.config.robot_name, name, self.footprint_config.robot_timeout)
+        self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), now))
 
     def _on_to_fleet(self, msg):
         try:
@@ -244,6 +342,7 @@ def main():
         package_logger.setLevel(logging.INFO)
     try:
         config = read_config()
+        footprint_config = FootprintConfig.from_params()
         subscriber_wait = rospy.get_param("~subscriber_wait", 10.0)
         if isinstance(subscriber_wait, bool) or not isinstance(subscriber_wait, (int, float)) \
                 or not 0 <= subscriber_wait <= 3600:
@@ -251,7 +350,7 @@ def main():
     except ValueError as err:
         rospy.logfatal("coaty_bridge: bad parameter: %s", err)
         sys.exit(2)
-    node = BridgeNode(config)
+    node = BridgeNode(config, footprint_config)
     rospy.on_shutdown(node.shutdown)
     node.start(float(subscriber_wait))
     rospy.spin()

@@ -8,7 +8,9 @@ recovery behaviour), stuck_feedback out only with stuck_feedback_on_local_failur
 modified move_base), stuck_feedback and move_base/recovery_status in (the sharing layer's
 triggers, as in the costmap_2d plugin), global_costmap/costmap, plan (and
 move_base/NavfnROS/plan), shared_obstacle_markers, obstacle_proposals / obstacle_updates out,
-shared_obstacles / expired_obstacles in. Service ~snapshot (fleet_sim/Snapshot) writes a PNG of
+shared_obstacles / expired_obstacles in, ~global_costmap/footprint out (move_base's footprint at the
+robot's pose, which the Coaty bridge advertises) and fleet_robots in (the fleet robots the bridge heard:
+their cells are never shared). Service ~snapshot (fleet_sim/Snapshot) writes a PNG of
 this robot's view.
 """
 import logging
@@ -20,10 +22,10 @@ import actionlib
 import numpy as np
 import rospy
 import tf2_ros
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import Point32, PolygonStamped, PoseStamped, Twist
 from move_base_msgs.msg import MoveBaseAction, MoveBaseFeedback, MoveBaseResult, RecoveryStatus
 from nav_msgs.msg import OccupancyGrid, Path
-from sharing_msgs.msg import SharedObstacle
+from sharing_msgs.msg import RobotFootprintArray, SharedObstacle
 from std_msgs.msg import Empty, String
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -112,6 +114,8 @@ class NavNode:
         self.stuck_pending = None
         self.pose = None
         self.dropped = 0
+        self.fleet_robots_dropped = 0
+        self.fleet_robot_names = ()
 
         self.cmd_pub = rospy.Publisher("cmd_vel", Twist, queue_size=1)
         self.stuck_pub = rospy.Publisher("stuck_feedback", Empty, queue_size=10)
@@ -123,6 +127,9 @@ class NavNode:
         self.marker_pub = rospy.Publisher("shared_obstacle_markers", MarkerArray, queue_size=1, latch=True)
         self.proposal_pub = rospy.Publisher("obstacle_proposals", SharedObstacle, queue_size=10)
         self.update_pub = rospy.Publisher("obstacle_updates", SharedObstacle, queue_size=100)
+        # move_base's global costmap publishes the footprint at the robot's pose here (costmap_2d's
+        # Costmap2DROS); the Coaty bridge advertises it so that no peer shares this robot
+        self.footprint_pub = rospy.Publisher("~global_costmap/footprint", PolygonStamped, queue_size=1)
         rospy.Subscriber("/map", OccupancyGrid, self._on_map, queue_size=1)
 
     # --- start-up -----------------------------------------------------------------------------
@@ -153,6 +160,7 @@ class NavNode:
         rospy.Subscriber("base_scan", _LaserScan, self._on_scan, queue_size=2)
         rospy.Subscriber("shared_obstacles", SharedObstacle, self._on_shared, queue_size=100)
         rospy.Subscriber("expired_obstacles", String, self._on_expired, queue_size=100)
+        rospy.Subscriber("fleet_robots", RobotFootprintArray, self._on_fleet_robots, queue_size=2)
         rospy.Subscriber("stuck_feedback", Empty, self._on_stuck_feedback, queue_size=10)
         # Like the costmap_2d plugin: a recovery announced by this host or by a move_base beside it.
         rospy.Subscriber("move_base/recovery_status", rospy.AnyMsg, self._on_recovery_status, queue_size=10)
@@ -266,6 +274,63 @@ class NavNode:
         if not result.ok:
             rospy.logwarn_throttle(1.0, "fleet_nav (%s): ignoring shared obstacle %s from %s: %s"
                                    % (self.robot, msg.uuid, msg.source, result.error))
+
+    def _fleet_robot(self, robot):
+        """One RobotFootprint -> (name, [(x, y)] in the global frame, stamp); ValueError says why not."""
+        points = [(p.x, p.y) for p in robot.footprint.points]
+        if not robot.robot:
+            raise ValueError("no robot name")
+        if not 1 <= len(points) <= 1000 or not all(math.isfinite(v) for p in points for v in p):
+            raise ValueError("footprint of %d vertices, or not finite" % len(points))
+        xs, ys = [x for x, _ in points], [y for _, y in points]
+        if max(xs) - min(xs) > 50.0 or max(ys) - min(ys) > 50.0:
+            raise ValueError("footprint wider than 50 m: not a robot")
+        frame = robot.header.frame_id.lstrip("/") or self.params.global_frame
+        if frame != self.params.global_frame:
+            try:
+                tx, ty, _, tyaw = self._lookup(self.params.global_frame, frame, rospy.Time(0), 0.05)
+            except tf2_ros.TransformException as err:
+                raise ValueError("cannot transform its footprint from %s to %s: %s"
+                                 % (frame, self.params.global_frame, err)) from None
+            c, s = math.cos(tyaw), math.sin(tyaw)
+            points = [(tx + c * x - s * y, ty + s * x + c * y) for x, y in points]
+        stamp = robot.header.stamp.to_sec() if not robot.header.stamp.is_zero() else rospy.get_time()
+        return robot.robot, np.asarray(points, dtype=float), stamp
+
+    def _on_fleet_robots(self, msg):
+        """The fleet robots the bridge heard (the whole set): their cells are never shared."""
+        if not self.params.sharing_enabled or self.costmap is None:
+            return
+        robots = []
+        for robot in msg.robots:
+            if robot.robot == self.robot:
+                continue
+            try:
+                robots.append(self._fleet_robot(robot))
+            except ValueError as err:
+                self.fleet_robots_dropped += 1
+                rospy.logwarn_throttle(5.0, "fleet_nav (%s): ignoring fleet robot %r (%d dropped): %s"
+                                       % (self.robot, robot.robot[:40], self.fleet_robots_dropped, err))
+        with self.lock:
+            try:
+                self.costmap.layer.fleet_robots.replace_all(robots)
+            except ValueError as err:  # what the checks above let through, the core refuses whole
+                self.fleet_robots_dropped += 1
+                rospy.logwarn_throttle(5.0, "fleet_nav (%s): ignoring fleet_robots: %s" % (self.robot, err))
+                return
+        names = tuple(name for name, _, _ in robots)
+        if names != self.fleet_robot_names:
+            self.fleet_robot_names = names
+            rospy.loginfo("fleet_nav (%s): fleet robots never shared: %s", self.robot, ", ".join(names) or "none")
+
+    def _publish_footprint(self, x, y, yaw):
+        msg = PolygonStamped()
+        msg.header.frame_id = self.params.global_frame
+        msg.header.stamp = rospy.Time.now()
+        c, s = math.cos(yaw), math.sin(yaw)
+        msg.polygon.points = [Point32(x + c * fx - s * fy, y + s * fx + c * fy, 0.0)
+                              for fx, fy in self.params.footprint_polygon]
+        self.footprint_pub.publish(msg)
 
     def _on_expired(self, msg):
         with self.lock:
@@ -408,6 +473,7 @@ class NavNode:
                 if now >= next_update:
                     next_update = now + 1.0 / p.update_frequency
                     self.costmap.update(x, y)
+                    self._publish_footprint(x, y, yaw)
                     shared = tuple((u, self.costmap.layer.shared_max_version(u))
                                    for u in self.costmap.layer.shared_uuids())
                     if shared != shared_seen:

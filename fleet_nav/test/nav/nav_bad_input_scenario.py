@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""Test node of nav_bad_input.test: fleet_nav without /map, then with goals it must refuse."""
+"""Test node of nav_bad_input.test: fleet_nav without /map, then with goals it must refuse, then bad
+fleet robots (fleet_robots) it must drop while keeping the good one."""
 import math
 import threading
 import unittest
@@ -8,10 +9,11 @@ import actionlib
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import Point32, PoseStamped
 from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from nav_msgs.msg import OccupancyGrid
 from rosgraph_msgs.msg import Log
+from sharing_msgs.msg import RobotFootprint, RobotFootprintArray
 
 NODE = "/robot_7/move_base"
 
@@ -92,6 +94,32 @@ class NavBadInput(unittest.TestCase):
         simple.publish(pose)
         level, _ = self.wait_for_line(["robot_7", "move_base_simple/goal rejected", "-1.00", "outside the map"], 10.0)
         self.assertEqual(Log.WARN, level)
+
+        # 5. Fleet robots from the bridge: bad entries are dropped with a warning naming the robot, the
+        # good one is kept (its cells are never shared), this robot's own entry is ignored.
+        def robot(name, points, frame="map"):
+            r = RobotFootprint()
+            r.header.frame_id = frame
+            r.header.stamp = rospy.Time.now()
+            r.robot = name
+            r.footprint.points = [Point32(x, y, 0.0) for x, y in points]
+            return r
+        square = [(1.0, 1.0), (1.6, 1.0), (1.6, 1.6), (1.0, 1.6)]
+        fleet = rospy.Publisher("/robot_7/fleet_robots", RobotFootprintArray, queue_size=1, latch=True)
+        fleet.publish(RobotFootprintArray(robots=[
+            robot("robot_bad_nan", [(float("nan"), 1.0), (2.0, 1.0), (2.0, 2.0)]),
+            robot("robot_bad_empty", []),
+            robot("robot_bad_frame", square, frame="nowhere"),
+            robot("robot_bad_huge", [(0.0, 0.0), (90.0, 0.0), (0.0, 1.0)]),
+            robot("robot_7", square),
+            robot("robot_2", square)]))
+        level, text = self.wait_for_line(["robot_7", "ignoring fleet robot", "robot_bad"], 10.0)
+        self.assertEqual(Log.WARN, level)
+        level, text = self.wait_for_line(["robot_7", "fleet robots never shared: robot_2"], 10.0)
+        self.assertEqual(Log.INFO, level)
+        self.assertNotIn("robot_bad", text)
+        self.assertNotIn("robot_7,", text)
+        self.assertTrue(client.wait_for_server(rospy.Duration(1.0)), "fleet_nav stopped serving")
 
 
 if __name__ == "__main__":

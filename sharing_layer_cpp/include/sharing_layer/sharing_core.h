@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "sharing_layer/cost_grid.h"
+#include "sharing_layer/fleet_robots.h"
 #include "sharing_layer/observation.h"
 #include "sharing_layer/proposals.h"
 #include "sharing_layer/shared_obstacle.h"
@@ -78,9 +79,11 @@ enum class TriggerReason
   Static,         ///< everything marked near the robot is part of the static map (within static_tolerance)
   AlreadyShared,  ///< the cells lie in rectangles of obstacles already shared
   TooSmall,       ///< candidate groups were smaller than min_cluster_cells
+  FleetRobot,     ///< every candidate cell lies within a known fleet robot's footprint (plus margin)
 };
 
-/// @return "none", "proposed", "debounced", "nothing_marked", "out_of_range", "static", "already_shared", "too_small"
+/// @return "none", "proposed", "debounced", "nothing_marked", "out_of_range", "static", "already_shared", "too_small",
+/// "fleet_robot"
 const char* triggerReasonName(TriggerReason reason);
 
 /// @brief Outcome of one trigger, for the caller to publish the proposals and log the message.
@@ -238,6 +241,15 @@ public:
   /// @brief World bounds of shared cells added or removed since the last call, then forgets them.
   WorldBounds takeDirtyBounds();
 
+  /**
+   * @brief The fleet robots this layer knows (footprints at their poses, grid frame). Their cells (footprint
+   * plus robot_exclusion_margin) are never shared: not proposed by any trigger, not remembered for one, no
+   * plan-blocked trigger, not marked in monitoring updates. Robots not refreshed within robot_timeout are
+   * forgotten at the next processScan, trigger or checkPlan.
+   */
+  FleetRobots& fleetRobots() { return fleet_robots_; }
+  const FleetRobots& fleetRobots() const { return fleet_robots_; }
+
   const CostGrid& obstacleGrid() const { return obstacles_; }
   CostGrid& obstacleGrid() { return obstacles_; }
   /// @return the current shareable cells, sorted
@@ -253,7 +265,9 @@ private:
   void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, const Observation& observation,
                 double now_s);
   /// @brief Shareable cells plus remembered cells within trigger_radius of (x, y), not static, not shared.
-  std::vector<std::uint32_t> candidates(double robot_x, double robot_y, bool use_memory) const;
+  /// Cells of known fleet robots are left out unless with_robots.
+  std::vector<std::uint32_t> candidates(double robot_x, double robot_y, bool use_memory,
+                                        bool with_robots = false) const;
   std::vector<Proposal> group(const std::vector<std::uint32_t>& cells, double robot_x, double robot_y) const;
   /// @brief Fills reason and message for a trigger that proposed nothing.
   void explainNothing(TriggerReport& report, double robot_x, double robot_y, bool use_memory) const;
@@ -301,6 +315,8 @@ private:
   std::vector<std::uint8_t> steady_flag_;  ///< per cell: a growth candidate of the current scan (else 0)
   std::map<std::string, SharedObstacle> shared_;
   WorldBounds dirty_;
+  FleetRobots fleet_robots_;  ///< fleet robots' footprints: never shared
+  std::vector<std::uint32_t> last_robot_marked_;  ///< non-static cells the last scan marked on fleet robots
 };
 
 }  // namespace sharing_layer

@@ -93,10 +93,12 @@ def main(argv=None):
                                                  for b in blocks.values()))
     lat = [x * 1000.0 for x in fleet.latencies()]
     rospy.sleep(2.5)  # one more /diagnostics round from every bridge
-    bytes_pub = 0
+    bytes_pub = footprint_bytes = 0
     for r in fleet.robots:
         try:
             bytes_pub += int(float(r.bridge_stats.get("bytes_published", 0)))
+            # the robots' footprint adverts (fleet robots are never shared), counted apart from obstacles
+            footprint_bytes += int(float(r.bridge_stats.get("footprint_bytes_published", 0)))
         except ValueError:
             pass
     out = {
@@ -116,6 +118,7 @@ def main(argv=None):
         "goals_file": facility["path"],
         "distance_m": sum(r.distance for r in fleet.robots),
         "bytes_on_bus": bytes_pub,
+        "footprint_bytes_on_bus": footprint_bytes,
         "shared_obstacles": sum(len(r.shares()) for r in fleet.robots),
         "latency_ms": lat,
         "latency_ms_p50": percentile(lat, 50),

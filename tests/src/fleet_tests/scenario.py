@@ -22,7 +22,7 @@ from std_msgs.msg import Empty, String
 
 from fleet_sim.srv import AddBlock, MoveBlock, RemoveBlock, Snapshot
 from fleet_nav.goals import move_base_goal
-from sharing_msgs.msg import SharedObstacle
+from sharing_msgs.msg import RobotFootprintArray, SharedObstacle
 from sharing_msgs.srv import ListObstacles
 
 STATE_NAMES = {v: k for k, v in GoalStatus.__dict__.items() if k.isupper() and isinstance(v, int)}
@@ -96,6 +96,7 @@ class Robot:
         self.bridge_stats = {}    # latest coaty_bridge /diagnostics values
         self.pose = None
         self.distance = 0.0
+        self.fleet_robots = ()    # names in the latest fleet_robots of this robot's bridge
         rospy.Subscriber(ns + "stuck_feedback", Empty, self._on_stuck, queue_size=10)
         rospy.Subscriber(ns + "to_fleet", SharedObstacle, self._append(self.to_fleet), queue_size=1000)
         rospy.Subscriber(ns + "from_fleet", SharedObstacle, self._append(self.from_fleet), queue_size=1000)
@@ -103,6 +104,7 @@ class Robot:
         rospy.Subscriber(ns + "plan", Path, self._on_plan, queue_size=10)
         rospy.Subscriber(ns + "base_pose_ground_truth", Odometry, self._on_pose, queue_size=10)
         rospy.Subscriber(ns + "global_costmap/costmap", OccupancyGrid, self._on_costmap, queue_size=1)
+        rospy.Subscriber(ns + "fleet_robots", RobotFootprintArray, self._on_fleet_robots, queue_size=2)
         rospy.Subscriber(ns + "obstacle_proposals", SharedObstacle, self._wall(self.proposals_wall), queue_size=100)
         rospy.Subscriber(ns + "shared_obstacles", SharedObstacle, self._wall(self.layer_in_wall), queue_size=1000)
         self.client = actionlib.SimpleActionClient(ns + "move_base", MoveBaseAction)
@@ -144,6 +146,22 @@ class Robot:
             self.pose = (x, y)
             if not self.track or t - self.track[-1][0] >= 0.2:
                 self.track.append((t, x, y))
+
+    def _on_fleet_robots(self, msg):
+        with self.lock:
+            self.fleet_robots = tuple(r.robot for r in msg.robots)
+
+    def fleet_robot_names(self):
+        """The fleet robots this robot's bridge currently hears (its layer never shares them)."""
+        with self.lock:
+            return self.fleet_robots
+
+    def pose_at(self, t):
+        """True (x, y) at sim time t: the last track point at or before t (the first one before the track)."""
+        with self.lock:
+            before = [p for p in self.track if p[0] <= t]
+            point = before[-1] if before else (self.track[0] if self.track else (t, float("nan"), float("nan")))
+        return point[1], point[2]
 
     def _on_costmap(self, msg):
         with self.lock:

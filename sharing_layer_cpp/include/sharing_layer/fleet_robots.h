@@ -1,0 +1,110 @@
+#ifndef SHARING_LAYER_FLEET_ROBOTS_H
+#define SHARING_LAYER_FLEET_ROBOTS_H
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "sharing_layer/grid_geometry.h"
+
+namespace sharing_layer
+{
+/// @brief Parameters of the fleet-robot exclusion (DESIGN §6: fleet robots are never obstacles).
+struct FleetRobotParams
+{
+  double margin = 0.2;   ///< robot_exclusion_margin: m around a footprint whose cells are excluded too
+  double timeout = 3.0;  ///< robot_timeout: s after its last refresh that a robot is forgotten (0: never)
+
+  /// @throws std::invalid_argument naming the parameter and its value
+  void validate() const;
+};
+
+/// @brief One fleet robot as the layer knows it: its footprint placed at its pose, in the grid's frame.
+struct FleetRobot
+{
+  std::string name;                                   ///< the robot's name (its bridge's robot_name)
+  std::vector<std::pair<double, double>> footprint;   ///< polygon vertices, world (x, y) in the grid's frame
+  double stamp = 0.0;                                 ///< when it was last refreshed, s (the layer's clock)
+};
+
+/// Largest extent (m, either axis) of an accepted footprint: a robot, not a building.
+constexpr double kMaxFootprintExtent = 50.0;
+/// Most vertices of an accepted footprint.
+constexpr std::size_t kMaxFootprintPoints = 1000;
+
+/**
+ * @brief The fleet robots a layer knows, and the grid cells they cover: every cell whose centre lies
+ * inside a robot's footprint polygon or within `margin` of its outline. The sharing core never shares
+ * those cells (proposals, trigger memory, plan trigger, marked cells of monitoring updates): a robot
+ * waiting near a block is not an obstacle of the fleet.
+ *
+ * Robots not refreshed within `timeout` are forgotten by expire(). ROS-free; times are passed in.
+ */
+class FleetRobots
+{
+public:
+  /// @throws std::invalid_argument on bad parameters
+  explicit FleetRobots(const GridGeometry& geometry, const FleetRobotParams& params = FleetRobotParams());
+
+  const FleetRobotParams& params() const { return params_; }
+  /// @brief Changes margin / timeout; the excluded cells are recomputed. @throws std::invalid_argument
+  void setParams(const FleetRobotParams& params);
+
+  /**
+   * @brief Adds or refreshes one robot. @throws std::invalid_argument (and changes nothing) on an empty
+   * name, no vertex, more than kMaxFootprintPoints vertices, a non-finite vertex or stamp, or a footprint
+   * wider than kMaxFootprintExtent.
+   */
+  void update(const FleetRobot& robot);
+
+  /**
+   * @brief The whole known set at once (a fleet_robots message): robots not in it are forgotten.
+   * All robots are validated first; @throws std::invalid_argument naming the bad one and changes nothing.
+   * A name listed twice keeps its last entry.
+   */
+  void replaceAll(const std::vector<FleetRobot>& robots);
+
+  /// @return false when the name is unknown
+  bool forget(const std::string& name);
+  /// @brief Forgets everything.
+  void clear();
+
+  /// @brief Forgets robots whose stamp is more than timeout away from now_s (older, or from a clock
+  /// that went backwards); timeout 0 keeps them. @return the names forgotten, sorted
+  std::vector<std::string> expire(double now_s);
+
+  /// @return whether a cell lies within a known robot's footprint plus margin (no bounds check)
+  bool excludes(std::uint32_t index) const { return !count_.empty() && count_[index] != 0; }
+  /// @return the excluded cells, sorted
+  std::vector<std::uint32_t> excludedCells() const;
+  /// @return names of the known robots who cover a cell, sorted
+  std::vector<std::string> robotsAt(std::uint32_t index) const;
+
+  /// @return known robot names, sorted
+  std::vector<std::string> names() const;
+  const std::map<std::string, FleetRobot>& robots() const { return robots_; }
+  std::size_t size() const { return robots_.size(); }
+  bool empty() const { return robots_.empty(); }
+
+  /// @brief The cells a footprint covers with a margin, sorted (what update() excludes for it).
+  static std::vector<std::uint32_t> rasterize(const GridGeometry& geometry,
+                                              const std::vector<std::pair<double, double>>& footprint, double margin);
+
+  /// @brief What update() refuses: @throws std::invalid_argument naming the robot and the fault
+  static void check(const FleetRobot& robot);
+
+private:
+  void count(const std::vector<std::uint32_t>& cells, int delta);
+
+  GridGeometry geometry_;
+  FleetRobotParams params_;
+  std::map<std::string, FleetRobot> robots_;
+  std::map<std::string, std::vector<std::uint32_t>> cells_;   ///< per robot: the cells it excludes
+  std::vector<std::uint16_t> count_;  ///< per cell: how many robots cover it (allocated on the first robot)
+};
+
+}  // namespace sharing_layer
+
+#endif  // SHARING_LAYER_FLEET_ROBOTS_H

@@ -1,0 +1,287 @@
+#include "sharing_layer/fleet_robots.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace sharing_layer
+{
+void FleetRobotParams::validate() const
+{
+  if (!std::isfinite(margin) || margin < 0.0 || margin > kMaxFootprintExtent)
+  {
+    throw std::invalid_argument("robot_exclusion_margin must be 0.." + std::to_string(kMaxFootprintExtent) +
+                                " m, got " + std::to_string(margin));
+  }
+  if (!std::isfinite(timeout) || timeout < 0.0)
+  {
+    throw std::invalid_argument("robot_timeout must be finite and >= 0 s, got " + std::to_string(timeout));
+  }
+}
+
+FleetRobots::FleetRobots(const GridGeometry& geometry, const FleetRobotParams& params)
+  : geometry_(geometry), params_(params)
+{
+  params_.validate();
+}
+
+void FleetRobots::setParams(const FleetRobotParams& params)
+{
+  params.validate();
+  params_ = params;
+  const std::map<std::string, FleetRobot> known = robots_;
+  clear();
+  for (const auto& entry : known)
+  {
+    update(entry.second);
+  }
+}
+
+void FleetRobots::check(const FleetRobot& robot)
+{
+  if (robot.name.empty())
+  {
+    throw std::invalid_argument("fleet robot: empty name");
+  }
+  const std::string what = "fleet robot " + robot.name + ": ";
+  if (!std::isfinite(robot.stamp))
+  {
+    throw std::invalid_argument(what + "stamp not finite");
+  }
+  if (robot.footprint.empty() || robot.footprint.size() > kMaxFootprintPoints)
+  {
+    throw std::invalid_argument(what + "footprint has " + std::to_string(robot.footprint.size()) +
+                                " vertices, expected 1.." + std::to_string(kMaxFootprintPoints));
+  }
+  double min_x = robot.footprint.front().first, max_x = min_x;
+  double min_y = robot.footprint.front().second, max_y = min_y;
+  for (const auto& p : robot.footprint)
+  {
+    if (!std::isfinite(p.first) || !std::isfinite(p.second))
+    {
+      throw std::invalid_argument(what + "footprint vertex not finite");
+    }
+    min_x = std::min(min_x, p.first);
+    max_x = std::max(max_x, p.first);
+    min_y = std::min(min_y, p.second);
+    max_y = std::max(max_y, p.second);
+  }
+  if (max_x - min_x > kMaxFootprintExtent || max_y - min_y > kMaxFootprintExtent)
+  {
+    throw std::invalid_argument(what + "footprint " + std::to_string(max_x - min_x) + " x " +
+                                std::to_string(max_y - min_y) + " m is larger than " +
+                                std::to_string(kMaxFootprintExtent) + " m: not a robot");
+  }
+}
+
+void FleetRobots::count(const std::vector<std::uint32_t>& cells, int delta)
+{
+  if (count_.empty())
+  {
+    if (delta < 0)
+    {
+      return;
+    }
+    count_.assign(geometry_.cellCount(), 0);
+  }
+  for (std::uint32_t index : cells)
+  {
+    count_[index] = static_cast<std::uint16_t>(count_[index] + delta);
+  }
+}
+
+void FleetRobots::update(const FleetRobot& robot)
+{
+  check(robot);
+  std::vector<std::uint32_t> cells = rasterize(geometry_, robot.footprint, params_.margin);
+  auto found = cells_.find(robot.name);
+  if (found != cells_.end())
+  {
+    count(found->second, -1);
+  }
+  count(cells, +1);
+  cells_[robot.name] = std::move(cells);
+  robots_[robot.name] = robot;
+}
+
+void FleetRobots::replaceAll(const std::vector<FleetRobot>& robots)
+{
+  for (const FleetRobot& robot : robots)
+  {
+    check(robot);
+  }
+  clear();
+  for (const FleetRobot& robot : robots)
+  {
+    update(robot);
+  }
+}
+
+bool FleetRobots::forget(const std::string& name)
+{
+  auto found = cells_.find(name);
+  if (found == cells_.end())
+  {
+    return false;
+  }
+  count(found->second, -1);
+  cells_.erase(found);
+  robots_.erase(name);
+  return true;
+}
+
+void FleetRobots::clear()
+{
+  for (const auto& entry : cells_)
+  {
+    count(entry.second, -1);
+  }
+  cells_.clear();
+  robots_.clear();
+}
+
+std::vector<std::string> FleetRobots::expire(double now_s)
+{
+  std::vector<std::string> gone;
+  if (params_.timeout <= 0.0 || !std::isfinite(now_s))
+  {
+    return gone;
+  }
+  for (const auto& entry : robots_)
+  {
+    // A stamp far in the future means the clock went backwards (a restarted simulation): as stale.
+    if (std::fabs(now_s - entry.second.stamp) > params_.timeout)
+    {
+      gone.push_back(entry.first);
+    }
+  }
+  for (const std::string& name : gone)
+  {
+    forget(name);
+  }
+  return gone;
+}
+
+std::vector<std::uint32_t> FleetRobots::excludedCells() const
+{
+  std::vector<std::uint32_t> cells;
+  for (const auto& entry : cells_)
+  {
+    cells.insert(cells.end(), entry.second.begin(), entry.second.end());
+  }
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  return cells;
+}
+
+std::vector<std::string> FleetRobots::robotsAt(std::uint32_t index) const
+{
+  std::vector<std::string> names;
+  if (!excludes(index))
+  {
+    return names;
+  }
+  for (const auto& entry : cells_)
+  {
+    if (std::binary_search(entry.second.begin(), entry.second.end(), index))
+    {
+      names.push_back(entry.first);
+    }
+  }
+  return names;
+}
+
+std::vector<std::string> FleetRobots::names() const
+{
+  std::vector<std::string> out;
+  for (const auto& entry : robots_)
+  {
+    out.push_back(entry.first);
+  }
+  return out;
+}
+
+namespace
+{
+/// Crossing-number test; points on the outline may go either way (the margin covers them).
+bool insidePolygon(const std::vector<std::pair<double, double>>& poly, double x, double y)
+{
+  bool inside = false;
+  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++)
+  {
+    const double xi = poly[i].first, yi = poly[i].second, xj = poly[j].first, yj = poly[j].second;
+    if ((yi > y) != (yj > y) && x < (xj - xi) * (y - yi) / (yj - yi) + xi)
+    {
+      inside = !inside;
+    }
+  }
+  return inside;
+}
+
+double segmentDistanceSq(double px, double py, double ax, double ay, double bx, double by)
+{
+  const double vx = bx - ax, vy = by - ay;
+  const double len_sq = vx * vx + vy * vy;
+  double t = len_sq > 0.0 ? ((px - ax) * vx + (py - ay) * vy) / len_sq : 0.0;
+  t = std::min(1.0, std::max(0.0, t));
+  const double dx = ax + t * vx - px, dy = ay + t * vy - py;
+  return dx * dx + dy * dy;
+}
+}  // namespace
+
+std::vector<std::uint32_t> FleetRobots::rasterize(const GridGeometry& g,
+                                                  const std::vector<std::pair<double, double>>& footprint,
+                                                  double margin)
+{
+  std::vector<std::uint32_t> cells;
+  if (footprint.empty())
+  {
+    return cells;
+  }
+  double min_x = footprint.front().first, max_x = min_x;
+  double min_y = footprint.front().second, max_y = min_y;
+  for (const auto& p : footprint)
+  {
+    min_x = std::min(min_x, p.first);
+    max_x = std::max(max_x, p.first);
+    min_y = std::min(min_y, p.second);
+    max_y = std::max(max_y, p.second);
+  }
+  // Cells whose centre may lie within the bounding box grown by the margin, clipped to the grid.
+  const double x0 = std::floor((min_x - margin - g.origin_x) / g.resolution - 0.5);
+  const double x1 = std::ceil((max_x + margin - g.origin_x) / g.resolution - 0.5);
+  const double y0 = std::floor((min_y - margin - g.origin_y) / g.resolution - 0.5);
+  const double y1 = std::ceil((max_y + margin - g.origin_y) / g.resolution - 0.5);
+  if (x1 < 0.0 || y1 < 0.0 || x0 >= g.size_x || y0 >= g.size_y)
+  {
+    return cells;
+  }
+  const unsigned int cx0 = static_cast<unsigned int>(std::max(0.0, x0));
+  const unsigned int cy0 = static_cast<unsigned int>(std::max(0.0, y0));
+  const unsigned int cx1 = static_cast<unsigned int>(std::min<double>(g.size_x - 1, x1));
+  const unsigned int cy1 = static_cast<unsigned int>(std::min<double>(g.size_y - 1, y1));
+  const double margin_sq = margin * margin;
+  const bool polygon = footprint.size() >= 3;
+  for (unsigned int my = cy0; my <= cy1; ++my)
+  {
+    for (unsigned int mx = cx0; mx <= cx1; ++mx)
+    {
+      double wx = 0.0, wy = 0.0;
+      g.mapToWorld(mx, my, wx, wy);
+      bool covered = polygon && insidePolygon(footprint, wx, wy);
+      for (std::size_t i = 0; !covered && i < footprint.size(); ++i)
+      {
+        const auto& a = footprint[i];
+        const auto& b = footprint[(i + 1) % footprint.size()];
+        covered = segmentDistanceSq(wx, wy, a.first, a.second, b.first, b.second) <= margin_sq;
+      }
+      if (covered)
+      {
+        cells.push_back(g.getIndex(mx, my));
+      }
+    }
+  }
+  return cells;  // row by row: already sorted
+}
+
+}  // namespace sharing_layer

@@ -1,0 +1,323 @@
+// Fleet robots are never shared (issue 12, part 5): footprint rasterisation, validation, timeout, and the
+// exclusion on every path of the core (stuck / recovery / manual triggers, trigger memory, plan trigger,
+// monitoring updates).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "ascii_grid.h"
+#include "sharing_layer/fleet_robots.h"
+#include "sharing_layer/sharing_core.h"
+#include "sim_scan.h"
+
+using namespace sharing_layer;
+using namespace sharing_layer::test;
+
+namespace
+{
+using Polygon = std::vector<std::pair<double, double>>;
+
+std::vector<std::uint32_t> allCells(const std::vector<Proposal>& proposals)
+{
+  std::vector<std::uint32_t> cells;
+  for (const Proposal& p : proposals)
+  {
+    cells.insert(cells.end(), p.cells.begin(), p.cells.end());
+  }
+  std::sort(cells.begin(), cells.end());
+  return cells;
+}
+
+/// Cells whose centre lies in [x0, x1] x [y0, y1].
+std::size_t countWithin(const std::vector<std::uint32_t>& cells, double x0, double y0, double x1, double y1)
+{
+  const GridGeometry g = grid();
+  return static_cast<std::size_t>(std::count_if(cells.begin(), cells.end(), [&](std::uint32_t index) {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(mx, my, wx, wy);
+    return wx >= x0 && wx <= x1 && wy >= y0 && wy <= y1;
+  }));
+}
+
+/// The tutorials' PR2 footprint (0.65 m square) at (x, y), axis-aligned.
+Polygon square(double x, double y, double half = 0.325)
+{
+  return { { x - half, y - half }, { x + half, y - half }, { x + half, y + half }, { x - half, y + half } };
+}
+
+FleetRobot robot(const std::string& name, const Polygon& footprint, double stamp)
+{
+  FleetRobot r;
+  r.name = name;
+  r.footprint = footprint;
+  r.stamp = stamp;
+  return r;
+}
+
+/// The scene of the stuck trigger: the stuck robot at (5, 3) facing north (+y), a block 1.5 m ahead of it,
+/// and a second robot (a 0.65 m square body) waiting 1.5 m to its right, inside obstacle_range.
+struct Scene
+{
+  SimWorld world = walledWorld();
+  Scene()
+  {
+    world.box(4.02, 4.5, 6.02, 4.8);     // the block
+    world.box(6.18, 2.68, 6.82, 3.32);   // robot_1's body, centred at (6.5, 3.0)
+  }
+  static Polygon waitingRobot() { return square(6.5, 3.0); }
+};
+}  // namespace
+
+TEST(FleetRobotsRaster, FootprintPlusMarginGolden)
+{
+  // 0.1 m cells; a triangle with vertices (0.2, 0.2), (1.0, 0.2), (0.2, 0.6): a cell is covered when its
+  // centre lies inside or within the margin of the outline.
+  const GridGeometry g(0.1, 0.0, 0.0, 12, 8);
+  const Polygon triangle{ { 0.2, 0.2 }, { 1.0, 0.2 }, { 0.2, 0.6 } };
+  EXPECT_EQ(picture({ "............",
+                      "............",
+                      "..#.........",
+                      "..###.......",
+                      "..#####.....",
+                      "..#######...",
+                      "............",
+                      "............" }),
+            drawCells(FleetRobots::rasterize(g, triangle, 0.0), 12, 8));
+  EXPECT_EQ(picture({ "............",
+                      ".##.........",
+                      ".####.......",
+                      ".######.....",
+                      ".########...",
+                      ".##########.",
+                      ".##########.",
+                      "............" }),
+            drawCells(FleetRobots::rasterize(g, triangle, 0.1), 12, 8));
+  // A single point with a margin is a disc, here clipped by the grid's east edge.
+  EXPECT_EQ(picture({ "............",
+                      "............",
+                      "............",
+                      "............",
+                      "............",
+                      "...........#",
+                      "...........#",
+                      "............" }),
+            drawCells(FleetRobots::rasterize(g, { { 1.2, 0.2 } }, 0.1), 12, 8));
+  EXPECT_TRUE(FleetRobots::rasterize(g, square(-5.0, -5.0), 0.2).empty());
+}
+
+TEST(FleetRobotsTable, BadRobotsAreRefusedAndChangeNothing)
+{
+  const GridGeometry g = grid();
+  FleetRobots robots(g);
+  robots.update(robot("robot_1", square(5.0, 5.0), 1.0));
+  const std::vector<std::uint32_t> before = robots.excludedCells();
+  ASSERT_FALSE(before.empty());
+  const double nan = std::nan("");
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<FleetRobot> bad{
+    robot("", square(1.0, 1.0), 1.0),                                // no name
+    robot("robot_2", {}, 1.0),                                       // no vertex
+    robot("robot_2", { { 1.0, nan }, { 2.0, 1.0 }, { 1.0, 2.0 } }, 1.0),
+    robot("robot_2", { { inf, 1.0 }, { 2.0, 1.0 }, { 1.0, 2.0 } }, 1.0),
+    robot("robot_2", square(1.0, 1.0), nan),                         // stamp
+    robot("robot_2", square(5.0, 5.0, 30.0), 1.0),                   // 60 m wide: not a robot
+    robot("robot_2", Polygon(kMaxFootprintPoints + 1, { 1.0, 1.0 }), 1.0),
+  };
+  for (const FleetRobot& r : bad)
+  {
+    EXPECT_THROW(robots.update(r), std::invalid_argument) << r.name;
+    EXPECT_THROW(robots.replaceAll({ robot("robot_3", square(2.0, 2.0), 1.0), r }), std::invalid_argument);
+    EXPECT_EQ(std::vector<std::string>{ "robot_1" }, robots.names());
+    EXPECT_EQ(before, robots.excludedCells());
+  }
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ -0.1, 3.0 }), std::invalid_argument);
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ nan, 3.0 }), std::invalid_argument);
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, -1.0 }), std::invalid_argument);
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, inf }), std::invalid_argument);
+  EXPECT_THROW(robots.setParams(FleetRobotParams{ 100.0, 3.0 }), std::invalid_argument);
+}
+
+TEST(FleetRobotsTable, MovesReplacesExpiresAndOverlaps)
+{
+  const GridGeometry g = grid();
+  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0 });
+  robots.update(robot("robot_1", square(2.0, 2.0), 10.0));
+  robots.update(robot("robot_2", square(2.3, 2.0), 10.0));  // overlapping footprints
+  const std::uint32_t shared_cell = g.getIndex(43, 40);      // (2.175, 2.025): covered by both
+  EXPECT_EQ((std::vector<std::string>{ "robot_1", "robot_2" }), robots.robotsAt(shared_cell));
+  robots.forget("robot_2");
+  EXPECT_TRUE(robots.excludes(shared_cell)) << "robot_1 still covers it";
+  // A robot that moves leaves no trace where it stood.
+  robots.update(robot("robot_1", square(7.0, 7.0), 11.0));
+  EXPECT_FALSE(robots.excludes(shared_cell));
+  EXPECT_EQ(FleetRobots::rasterize(g, square(7.0, 7.0), 0.2), robots.excludedCells());
+  // replaceAll: the message lists the whole set.
+  robots.replaceAll({ robot("robot_3", square(3.0, 3.0), 12.0) });
+  EXPECT_EQ(std::vector<std::string>{ "robot_3" }, robots.names());
+  EXPECT_EQ(FleetRobots::rasterize(g, square(3.0, 3.0), 0.2), robots.excludedCells());
+  // Timeout: kept at exactly 3 s, forgotten after; a stamp from far in the future (clock restarted) too.
+  EXPECT_TRUE(robots.expire(15.0).empty());
+  EXPECT_EQ(std::vector<std::string>{ "robot_3" }, robots.expire(15.01));
+  EXPECT_TRUE(robots.excludedCells().empty());
+  robots.update(robot("robot_4", square(3.0, 3.0), 100.0));
+  EXPECT_EQ(std::vector<std::string>{ "robot_4" }, robots.expire(1.0));
+  // Timeout 0 keeps robots until they are replaced or forgotten.
+  robots.setParams(FleetRobotParams{ 0.0, 0.0 });
+  robots.update(robot("robot_5", square(3.0, 3.0), 1.0));
+  EXPECT_TRUE(robots.expire(1e9).empty());
+  EXPECT_EQ(FleetRobots::rasterize(g, square(3.0, 3.0), 0.0), robots.excludedCells());
+}
+
+TEST(FleetRobotsCore, StuckTriggerDoesNotShareAWaitingRobot)
+{
+  Scene scene;
+  // Without knowing robot_1, the stuck robot shares it with the block: this test can fail.
+  {
+    SharingCore plain = makeCore();
+    plain.processScan(scene.world.scan(5.0, 3.0, M_PI / 2), 1.0);
+    const TriggerReport report = plain.trigger(TriggerSource::StuckFeedback, 1.05, 5.0, 3.0);
+    ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
+    EXPECT_GT(countWithin(allCells(report.proposals), 6.1, 2.6, 6.9, 3.4), 0u) << "robot_1 was not seen";
+  }
+  SharingCore core = makeCore();
+  double now = 1.0;
+  for (TriggerSource source : { TriggerSource::StuckFeedback, TriggerSource::RecoveryStatus, TriggerSource::Manual })
+  {
+    core.fleetRobots().update(robot("robot_1", Scene::waitingRobot(), now));  // its bridge's latest advert
+    core.processScan(scene.world.scan(5.0, 3.0, M_PI / 2), now);
+    EXPECT_EQ(0u, countWithin(core.shareableCells(), 6.1, 2.6, 6.9, 3.4));
+    EXPECT_EQ(0u, countWithin(core.rememberedCells(), 6.1, 2.6, 6.9, 3.4));
+    const TriggerReport report = core.trigger(source, now + 0.05, 5.0, 3.0);
+    ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
+    const std::vector<std::uint32_t> cells = allCells(report.proposals);
+    EXPECT_EQ(0u, countWithin(cells, 6.1, 2.6, 6.9, 3.4)) << triggerSourceName(source) << ": robot_1 shared";
+    EXPECT_EQ(cells.size(), countWithin(cells, 4.0, 4.45, 6.05, 4.85)) << "only the block";
+    EXPECT_GT(cells.size(), 20u);
+    now += 3.0;  // past trigger_debounce
+  }
+}
+
+TEST(FleetRobotsCore, OnlyARobotInViewSaysSoAndTheTimeoutForgetsIt)
+{
+  SimWorld world = walledWorld();
+  world.box(6.18, 2.68, 6.82, 3.32);  // robot_1's body, nothing else
+  SharingCore core = makeCore();
+  core.fleetRobots().update(robot("robot_1", square(6.5, 3.0), 1.0));
+  core.processScan(world.scan(5.0, 3.0, M_PI / 2), 1.0);
+  const TriggerReport report = core.trigger(TriggerSource::Manual, 1.1, 5.0, 3.0);
+  EXPECT_EQ(TriggerReason::FleetRobot, report.reason) << report.message;
+  EXPECT_TRUE(report.proposals.empty());
+  EXPECT_NE(report.message.find("robot_1"), std::string::npos) << report.message;
+  EXPECT_STREQ("fleet_robot", triggerReasonName(report.reason));
+
+  // robot_1's bridge stops advertising: 3 s later the layer forgets it, and the body is an obstacle again
+  // (an unknown thing standing there, as it would be for a robot outside the fleet).
+  core.processScan(world.scan(5.0, 3.0, M_PI / 2), 4.0);
+  EXPECT_EQ(1u, core.fleetRobots().size());
+  core.processScan(world.scan(5.0, 3.0, M_PI / 2), 4.2);
+  EXPECT_TRUE(core.fleetRobots().empty());
+  EXPECT_GT(countWithin(core.shareableCells(), 6.1, 2.6, 6.9, 3.4), 0u);
+  const TriggerReport later = core.trigger(TriggerSource::Manual, 4.3, 5.0, 3.0);
+  EXPECT_EQ(TriggerReason::Proposed, later.reason) << later.message;
+}
+
+TEST(FleetRobotsCore, TrailOfADepartedRobotIsNotProposedFromMemory)
+{
+  // robot_1 stands 1.5 m to the right, then drives out of view while the stuck robot backs off; a late
+  // recovery_status trigger uses the trigger memory, which must not hold robot_1's old cells.
+  SimWorld world = walledWorld();
+  world.box(4.02, 4.5, 6.02, 4.8);
+  world.box(6.18, 2.68, 6.82, 3.32);
+  SharingCore core = makeCore();
+  core.fleetRobots().update(robot("robot_1", square(6.5, 3.0), 1.0));
+  core.processScan(world.scan(5.0, 3.0, M_PI / 2), 1.0);
+  world.box(6.18, 2.68, 6.82, 3.32, 0);  // robot_1 leaves
+  core.fleetRobots().update(robot("robot_1", square(9.0, 9.0), 1.5));
+  core.processScan(world.scan(5.0, 1.0, M_PI / 2), 2.0);  // backed off 2 m; the block is now beyond 2.5 m
+  const TriggerReport report = core.trigger(TriggerSource::RecoveryStatus, 2.1, 5.0, 1.0);
+  ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
+  EXPECT_EQ(0u, countWithin(allCells(report.proposals), 6.1, 2.6, 6.9, 3.4)) << report.message;
+  EXPECT_GT(countWithin(allCells(report.proposals), 4.0, 4.45, 6.05, 4.85), 0u) << report.message;
+}
+
+TEST(FleetRobotsCore, RobotOnThePlanDoesNotFireThePlanTrigger)
+{
+  // The plan runs north from (5, 1) through where robot_1 waits at (5, 3.5).
+  SimWorld world = walledWorld();
+  world.box(4.68, 3.18, 5.32, 3.82);
+  std::vector<std::pair<double, double>> plan;
+  for (int i = 0; i <= 160; ++i)
+  {
+    plan.emplace_back(5.0, 1.0 + 0.05 * i);
+  }
+  const auto drive = [&](SharingCore& core, bool advertised) {
+    core.setPlan(plan);
+    TriggerReport report;
+    double now = 1.0;
+    for (double y = 0.6; y < 1.6; y += 0.05)
+    {
+      core.processScan(world.scan(5.0, y, M_PI / 2), now += 0.1);
+      report = core.checkPlan(5.0, y, now);
+      if (report.reason != TriggerReason::None)
+      {
+        break;
+      }
+      if (advertised)
+      {
+        core.fleetRobots().update(robot("robot_1", square(5.0, 3.5), now));
+      }
+    }
+    return report;
+  };
+  SharingCore plain = makeCore();
+  EXPECT_EQ(TriggerReason::Proposed, drive(plain, false).reason) << "without exclusion robot_1 blocks the plan";
+  SharingCore core = makeCore();
+  core.fleetRobots().update(robot("robot_1", square(5.0, 3.5), 1.0));
+  const TriggerReport report = drive(core, true);
+  EXPECT_EQ(TriggerReason::None, report.reason) << report.message;
+}
+
+TEST(FleetRobotsCore, MonitoringUpdatesDoNotMarkARobotInsideASharedRectangle)
+{
+  // A shared obstacle's rectangle covers the block and the space in front of it, where robot_1 now waits.
+  SimWorld world = walledWorld();
+  world.box(4.02, 4.5, 6.02, 4.8);
+  world.box(5.18, 3.68, 5.82, 4.32);  // robot_1, centred at (5.5, 4.0), inside the rectangle
+  const GridGeometry g = grid();
+  const auto apply = [&](SharingCore& core) {
+    ObstacleUpdate u;
+    u.uuid = "block";
+    u.rectangle = Subsection(3.9, 3.5, 6.1, 4.9);
+    u.marked = { g.getIndex(100, 92) };
+    u.deadline = 60;
+    u.source = "robot_2";
+    u.geometry = g;
+    u.version = 1;
+    ASSERT_TRUE(core.applyShared(u, 1.0).ok);
+  };
+  const auto marked = [&](SharingCore& core) {
+    std::vector<std::uint32_t> cells;
+    for (int i = 0; i < 3; ++i)
+    {
+      for (const ObstacleUpdate& update : core.processScan(world.scan(5.0, 2.6, M_PI / 2), 2.0 + 0.1 * i).updates)
+      {
+        cells.insert(cells.end(), update.marked.begin(), update.marked.end());
+      }
+    }
+    return cells;
+  };
+  SharingCore plain = makeCore();
+  apply(plain);
+  EXPECT_GT(countWithin(marked(plain), 5.1, 3.6, 5.9, 4.4), 0u) << "without exclusion robot_1 is marked";
+  SharingCore core = makeCore();
+  apply(core);
+  core.fleetRobots().update(robot("robot_1", square(5.5, 4.0), 2.0));
+  const std::vector<std::uint32_t> cells = marked(core);
+  EXPECT_EQ(0u, countWithin(cells, 5.1, 3.6, 5.9, 4.4));
+  EXPECT_GT(countWithin(cells, 4.0, 4.45, 6.05, 4.85), 0u) << "the block's visible face is still marked";
+}
