@@ -109,8 +109,12 @@ class Demo:
         r0, r1 = f.robots
         self.frame("start: robot_0 (blue) and robot_1 (green) bottom right, blocks in the right and middle corridors")
         if self.test == 1:
+            self.go(r1, "wait_1")
+            self.frame("robot_1 waits inside the right corridor, below block_right, on robot_0's way")
             self.go(r0, "orange")
-            self.frame("robot_0 reached orange after getting stuck at both blocks; both blocks shared (magenta)")
+            self.frame("robot_0 reached orange; each block was shared as it appeared on robot_0's plan (magenta), "
+                       "robot_1 was not")
+            self.go(r1, "start_1")
             self.go(r1, "purple")
             self.frame("robot_1 planned the open left corridor from the start and reached purple")
         elif self.test == 2:
@@ -132,7 +136,7 @@ class Demo:
             shares = f.wait_until(r0.shares, 60.0, "robot_0 to share block_right")
             rect = tuple(shares[0][1].rectangle_shape)
             uuid = shares[0][1].uuid
-            self.frame("robot_0 got stuck at block_right and shared it")
+            self.frame("robot_0 shared block_right as it appeared on its plan")
             f.wait_until(lambda: r0.pose[0] < 8.5, 60.0, "robot_0 to leave the right corridor")
             mx, my = (rect[0] + rect[2]) / 2.0, (rect[1] + rect[3]) / 2.0
             f.remove_block("block_right")
@@ -141,14 +145,14 @@ class Demo:
                        % math.degrees(TILT))
             self.go(r1, "red")
             rospy.sleep(2.0)
-            self.frame("robot_1 at red monitors the obstacle: cells inside the rectangle only")
+            self.frame("robot_1 at red monitors the obstacle: the moved face joins it where it touches it")
             self.go(r1, "start_1")
             r0.wait(100.0)
             self.frame("robot_1 back at its start, robot_0 at orange; both hold the same cells")
             f.wait_until(lambda: uuid not in r0.obstacles() and uuid not in r1.obstacles(), duration + 30.0,
                          "the obstacle to expire")
             rospy.sleep(2.5)
-            self.frame("deadline passed: the obstacle is gone from both robots, no message sent")
+            self.frame("nobody saw it for obstacle_duration: the obstacle is gone from both robots, no message sent")
         self.write()
 
     def events(self):
