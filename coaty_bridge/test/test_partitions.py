@@ -126,7 +126,7 @@ def test_partition_heals_and_lists_converge_without_resurrecting_cleared_cells(f
             wait_for(lambda: not r1.client.connected, "robot_1 cut off")
             y = r0.share([2.0, 2.0, 2.5, 2.5])                        # a new share
             r0.update(x.uuid, marked=(5050,), cleared=(cleared_cell,))  # an update and a clear
-            z = r0.share([3.0, 3.0, 3.5, 3.5])
+            z = r0.share([3.5, 3.5, 4.0, 4.0])                        # beyond merge_distance of y
             r0.update(z.uuid, cleared=z.marked)                       # z emptied entirely
             assert len(r1.state()) == 1, "robot_1 must not have heard anything while cut off"
 
@@ -168,7 +168,7 @@ def test_robot_restart_gets_live_obstacles_back_but_not_expired_or_cleared_ones(
         time.sleep(0.3)
         x = r0.share([0.0, 0.0, 0.5, 0.5])
         short = r0.share([2.0, 2.0, 2.5, 2.5], deadline=2)
-        w = r1.share([3.0, 3.0, 3.5, 3.5])
+        w = r1.share([3.5, 3.5, 4.0, 4.0])
         r0.update(x.uuid, cleared=x.marked[:3])
         wait_for(lambda: converged(r0, r1) and len(r1.state()) == 3, "three obstacles on both")
         wait_for(lambda: short.uuid not in dict((u, c) for u, _, c in r0.state())
