@@ -129,12 +129,13 @@ def test_classify_robot_wall_block_and_clean():
               "robot_1": [(0.0, 2.0, 2.0), (5.0, 2.0, 2.0), (10.0, 3.0, 2.0)]}
     groups = [["on_robot"], ["on_wall"], ["on_block"], ["clean"], ["own_pose"], ["robot_moved_away"]]
     walls = small_map()
-    blocks = [block_rect({"pose": [0.5, 0.3, 0.0], "size": [0.2, 0.2]})]   # a block against the wall at x 0.4..0.6
+    blocks = [block_rect({"pose": [0.5, 0.3, 0.0], "size": [0.2, 0.2]}),    # a block against the wall at x 0.4..0.6
+              block_rect({"pose": [5.0, 9.0, 0.0], "size": [1.0, 0.3]})]    # and one elsewhere
     cells = [
-        (5.0, "robot_0", "on_robot", [(8.0, 8.0), (2.4, 2.0)]),    # 0.4 m from robot_1: < 0.47 + 0.1
+        (5.0, "robot_0", "on_robot", [(8.0, 8.0), (2.52, 2.0)]),   # 0.52 m from robot_1: within 0.47 + 0.1
         (5.0, "robot_0", "on_wall", [(0.85, 0.15)]),              # 0.05 m above the wall, no block there
         (5.0, "robot_0", "on_block", [(0.5, 0.15)]),              # touches the wall, but on the block
-        (5.0, "robot_0", "clean", [(0.85, 0.8), (2.6, 2.0)]),     # 0.6 m from robot_1: > 0.57
+        (5.0, "robot_0", "clean", [(0.85, 0.25), (2.6, 2.0)]),    # 0.15 m from the wall, 0.6 m from robot_1
         (5.0, "robot_1", "own_pose", [(2.0, 2.0)]),               # the source's own pose: not another robot
         (9.0, "robot_0", "robot_moved_away", [(2.0, 2.0)]),       # robot_1 left (2.0, 2.0) by then (x = 2.8)
     ]
