@@ -80,7 +80,8 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
     (["--robots", "21"], "robots must be 1..20 in the facility layout"),
     (["--layout", "deadend", "--robots", "11"], "robots must be 1..10 in the deadend layout"),
     (["--seed", "x"], "invalid int value: 'x'"),
-    (["--obstacle-duration", "0"], "--obstacle-duration and --time-limit must be at least 1 s"),
+    (["--obstacle-duration", "0"], "--obstacle-duration must be at least 1 s"),
+    (["--time-limit", "-1"], "--time-limit at least 0"),
     (["--summarize", "/nonexistent/bench"], "--summarize: /nonexistent/bench is not a folder"),
     (["--summarize", os.path.dirname(os.path.abspath(__file__))], "no bench results"),
 ])
