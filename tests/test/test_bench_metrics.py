@@ -139,9 +139,11 @@ def test_classify_robot_wall_block_and_clean():
         (5.0, "robot_1", "own_pose", [(2.0, 2.0)]),               # the source's own pose: not another robot
         (9.0, "robot_0", "robot_moved_away", [(2.0, 2.0)]),       # robot_1 left (2.0, 2.0) by then (x = 2.8)
     ]
-    kinds = classify_obstacles(groups, cells, tracks, 0.47, walls, blocks)
+    evidence = {}
+    kinds = classify_obstacles(groups, cells, tracks, 0.47, walls, blocks, evidence=evidence)
     assert kinds == {0: (True, False), 1: (False, True), 2: (False, False), 3: (False, False),
                      4: (False, False), 5: (False, False)}
+    assert evidence == {0: {"robot": [5.0, 2.52, 2.0, "robot_1", 0.52]}, 1: {"wall": [5.0, 0.85, 0.15]}}
 
 
 def test_classify_per_merged_group():

@@ -156,7 +156,7 @@ def block_rect(block, margin=0.0):
     return (bx - sx / 2 - margin, by - sy / 2 - margin, bx + sx / 2 + margin, by + sy / 2 + margin)
 
 
-def classify_obstacles(groups, cells, tracks, robot_radius, walls, blocks=(), margin=0.1):
+def classify_obstacles(groups, cells, tracks, robot_radius, walls, blocks=(), margin=0.1, evidence=None):
     """{uuid group index: (was a robot, was a wall)} for the groups of obstacle_groups.
 
     cells: [(sim time, source robot, uuid, [(x, y) of each marked cell])] of every to_fleet message.
@@ -165,22 +165,32 @@ def classify_obstacles(groups, cells, tracks, robot_radius, walls, blocks=(), ma
     at the message's time. It was a wall when a marked cell lies within margin of an occupied cell
     of the a-priori map (walls: OccupancyIndex) and not within margin of a simulator block
     (blocks: rectangles from the goals file): the blocks reach 0.1 m into the corridor walls, so the
-    cells of every block face touch a wall; only cells the blocks do not explain count."""
+    cells of every block face touch a wall; only cells the blocks do not explain count.
+    evidence (a dict, optional) gets, per group found to be a robot or a wall, the first cell that
+    showed it: {k: {"robot": [t, x, y, robot name, distance m], "wall": [t, x, y]}}."""
     of_uuid = {u: k for k, group in enumerate(groups) for u in group}
     out = {k: [False, False] for k in range(len(groups))}
     for t, source, uuid, points in cells:
         k = of_uuid.get(uuid)
         if k is None:
             continue
-        others = [pose_at(track, t) for name, track in tracks.items() if name != source]
-        others = [p for p in others if p is not None]
+        others = [(name, pose_at(track, t)) for name, track in tracks.items() if name != source]
+        others = [(name, p) for name, p in others if p is not None]
         for x, y in points:
-            if not out[k][0] and any(math.hypot(x - px, y - py) <= robot_radius + margin for px, py in others):
-                out[k][0] = True
+            if not out[k][0]:
+                for name, (px, py) in others:
+                    d = math.hypot(x - px, y - py)
+                    if d <= robot_radius + margin:
+                        out[k][0] = True
+                        if evidence is not None:
+                            evidence.setdefault(k, {})["robot"] = [t, x, y, name, round(d, 3)]
+                        break
             if (not out[k][1] and walls is not None and walls.near(x, y, margin)
                     and not any(r[0] - margin <= x <= r[2] + margin and r[1] - margin <= y <= r[3] + margin
                                 for r in blocks)):
                 out[k][1] = True
+                if evidence is not None:
+                    evidence.setdefault(k, {})["wall"] = [t, x, y]
     return {k: tuple(v) for k, v in out.items()}
 
 
@@ -314,7 +324,9 @@ def main(argv=None):
     cells = [(t, m.source or name, m.uuid, [cell_centre(m, i) for i in m.marked_indexes]) for name, t, m in to_fleet]
     walls = OccupancyIndex.from_msg(grid) if grid is not None else None
     radius = robot_radius_param()
-    kinds = classify_obstacles(groups, cells, tracks, radius, walls, [block_rect(b) for b in blocks.values()])
+    evidence = {}
+    kinds = classify_obstacles(groups, cells, tracks, radius, walls, [block_rect(b) for b in blocks.values()],
+                               evidence=evidence)
     recoveries = {r.name: [name for _t, _x, _y, name in r.recoveries] for r in fleet.robots}
     out = {
         "robots": args.robots,
@@ -346,7 +358,8 @@ def main(argv=None):
         "obstacle_groups": groups,
         "obstacles_robots": sum(1 for robot, _wall in kinds.values() if robot),
         "obstacles_walls": sum(1 for _robot, wall in kinds.values() if wall),
-        "obstacle_kinds": {",".join(groups[k]): {"robot": v[0], "wall": v[1]} for k, v in kinds.items()},
+        "obstacle_kinds": {",".join(groups[k]): dict({"robot": v[0], "wall": v[1]}, evidence=evidence.get(k, {}))
+                           for k, v in kinds.items()},
         "classification": {"robot_radius_m": radius, "margin_m": 0.1, "map": grid is not None,
                            "merge_distance_m": merge_distance, "obstacle_duration_s": lifetime},
         "latency_ms": lat,
