@@ -218,3 +218,13 @@ def test_bench_defaults_are_the_launch_files():
     assert bf.non_defaults(args)[-1].startswith("bench: ")            # only the bench's own settings line
     lines = bf.non_defaults()
     assert not any("obstacle_duration" in line or "stuck_feedback" in line for line in lines)
+
+
+def test_thesis_nav_params_are_printed_as_non_defaults():
+    bf = load_bench_fleet()
+    path = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "config", "fleet_nav_thesis.yaml")
+    args = bf.make_parser().parse_args(["--nav-params", path])
+    lines = bf.non_defaults(args)
+    assert lines[0].startswith("nav_params: " + path)
+    assert "move_base stuck_feedback_on_local_failure: True (default False)" in lines
+    assert "move_base stuck_feedback_on_local_failure: True (default False)" not in bf.non_defaults()

@@ -82,6 +82,7 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
     (["--seed", "x"], "invalid int value: 'x'"),
     (["--obstacle-duration", "0"], "--obstacle-duration must be at least 1 s"),
     (["--time-limit", "-1"], "--time-limit at least 0"),
+    (["--nav-params", "/nonexistent/nav.yaml"], "--nav-params: /nonexistent/nav.yaml is not a file"),
     (["--summarize", "/nonexistent/bench"], "--summarize: /nonexistent/bench is not a folder"),
     (["--summarize", os.path.dirname(os.path.abspath(__file__))], "no bench results"),
 ])
