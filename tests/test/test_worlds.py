@@ -1,7 +1,7 @@
 """The worlds fleet.launch can run (fleet_launch/worlds, layout:=facility|deadend) load in our
 simulator, their maps agree with the simulated walls, and their goals files describe them.
 
-For each layout: the world loads strictly with 1, 2, 10 (facility also 20) robots at the start slots; the map
+For each layout: the world loads strictly with 1, 2 and 10 robots at the start slots; the map
 served by map_server is the floorplan the simulator rasterises, cell by cell, in the same frame
 (map frame = Stage world frame); the blocks of the goals file are the world's blocks and are not
 in the map; a robot's laser endpoints lie on mapped walls, or on a block where the map is free.
@@ -29,6 +29,7 @@ from fleet_tests.scenario import load_facility
 WORLDS = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "worlds")
 LAYOUTS = {"facility": "goals.yaml", "deadend": "deadend_goals.yaml"}
 INSCRIBED = 0.345     # fleet_nav's inscribed radius of the pr2 footprint (its start-up log line)
+CLEARANCE = 0.488 + 0.1   # fleet_nav's circumscribed radius of the padded footprint + its clearance_margin
 
 
 def world_path(layout, robots):
@@ -59,8 +60,8 @@ def occupied_world_grid(m):
     return m.data == 100, x, y
 
 
-@pytest.mark.parametrize("layout, robots", [(layout, n) for layout in sorted(LAYOUTS) for n in (1, 2, 10)]
-                         + [("facility", 20)])
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+@pytest.mark.parametrize("robots", [1, 2, 10])
 def test_world_loads_with_its_robots_at_the_start_slots(layout, robots):
     world = load(layout, robots)
     assert [r.name for r in world.robots] == ["robot_%d" % i for i in range(robots)]
@@ -203,25 +204,27 @@ def test_deadend_block_turns_the_straight_way_into_a_long_dead_end():
     assert cy1 - cy0 >= 7.5                                # the blocked corridor is long
 
 
-def test_facility_20_every_robot_can_leave_and_park_whatever_the_order():
-    """N = 20 (issue 14): with the 19 other robots waiting at their start slots, each robot's centre
-    can reach the top of the left corridor (the open way) with more than the inscribed radius from
-    every wall, block and robot; no robot waits under a corridor's mouth (each corridor stays open
-    to try, blocked or not); and with bench_goals[0..k-1] taken (farthest first), the k-th robot
-    can get from there to bench_goals[k]. Robots as 0.75 m squares (0.65 m body, 0.05 m origin
-    offset either way)."""
-    m = map_of("facility")
-    desc = facility("facility")
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_every_robot_can_leave_and_park_whatever_the_dispatch_order(layout):
+    """The bench sends the robots in an order drawn from its seed: with the 9 other robots waiting
+    at their start slots, each robot's centre can reach the top of the open corridor keeping
+    fleet_nav's clearance (circumscribed radius + clearance_margin) from every wall, block and
+    robot; and with bench_goals[0..k-1] taken (farthest first), the k-th robot sent can get from
+    there to bench_goals[k]. Robots as 0.75 m squares (0.65 m body, 0.05 m origin offset either way).
+    (With the inscribed radius instead, a second row of start slots for N = 20 passed here and
+    failed in fleet_nav: robots could not leave between the rows.)"""
+    m = map_of(layout)
+    desc = facility(layout)
     res = m.resolution
     occupied, x, y = occupied_world_grid(m)
     blocked = occupied.copy()
     for spec in desc["blocks"].values():
         (bx, by, _yaw), (bsx, bsy) = spec["pose"], spec["size"]
         blocked |= (abs(x - bx) <= bsx / 2) & (abs(y - by) <= bsy / 2)
-    world = load("facility", 20)
+    world = load(layout, 10)
     starts = [(r.pose[0], r.pose[1]) for r in world.robots]
     goals = [(g[0], g[1]) for g in desc["bench_goals"]]
-    assert len(starts) == 20 and len(goals) == 20
+    assert len(starts) == 10 and len(goals) >= 10
 
     def body(px, py):
         return (abs(x - px) <= 0.375) & (abs(y - py) <= 0.375)
@@ -230,15 +233,14 @@ def test_facility_20_every_robot_can_leave_and_park_whatever_the_order():
         return int(py / res), int(px / res)
 
     def connected(grid, a, b):
-        free = ndimage.distance_transform_edt(~grid) * res > INSCRIBED
+        free = ndimage.distance_transform_edt(~grid) * res > CLEARANCE
         labels, _n = ndimage.label(free, structure=np.ones((3, 3)))
         return labels[a] != 0 and labels[a] == labels[b]
 
-    for name, (cx0, cy0, cx1, _cy1) in desc["corridors"].items():
-        for k, (sx, sy) in enumerate(starts):
-            under = sx + 0.375 > cx0 - 0.15 and sx - 0.375 < cx1 + 0.15 and sy + 0.375 > cy0 - 1.0
-            assert not under, "robot_%d waits under the mouth of the %s corridor" % (k, name)
-    x0, _y0, x1, y1 = desc["corridors"]["left"]
+    blocked_corridors = {spec["corridor"] for spec in desc["blocks"].values()}
+    open_corridors = [c for name, c in desc["corridors"].items() if name not in blocked_corridors]
+    assert open_corridors
+    x0, _y0, x1, y1 = open_corridors[0]
     exit_cell = cell((x0 + x1) / 2, y1 + 0.5)
     for k, (sx, sy) in enumerate(starts):
         grid = blocked.copy()
@@ -246,7 +248,7 @@ def test_facility_20_every_robot_can_leave_and_park_whatever_the_order():
             if j != k:
                 grid |= body(ox, oy)
         assert connected(grid, cell(sx, sy), exit_cell), "robot_%d cannot leave its start slot" % k
-    for k, (gx, gy) in enumerate(goals):
+    for k, (gx, gy) in enumerate(goals[:10]):
         grid = blocked.copy()
         for ox, oy in goals[:k]:
             grid |= body(ox, oy)
