@@ -3,9 +3,9 @@
 A ``Fleet`` records, per robot: stuck events (sim time and true pose), recovery behaviours
 announced on ``move_base/recovery_status``, every message the robot's handler sends to
 (``to_fleet``) and gets from (``from_fleet``) its bridge, every plan, the true trajectory, and the
-latest costmap; and the a-priori map (/map). ``BrokerCounters`` reads mosquitto's $SYS byte
-counters. The Fleet it sends move_base goals, changes the simulator's blocks and
-reads the handlers' obstacle lists. Only observation: obstacles travel between robots through
+latest costmap; and the a-priori map (/map). It sends move_base goals, changes the simulator's
+blocks and reads the handlers' obstacle lists. ``BrokerCounters`` reads mosquitto's $SYS byte
+counters. Only observation: obstacles travel between robots through
 MQTT alone (fleet.launch), the test node never forwards anything.
 """
 import math
