@@ -1,11 +1,15 @@
-"""The fleet bench's "robot drove into a blocked corridor" (fleet_tests.bench.entered_blocked) on the
-geometry of both layouts' goals files."""
+"""The fleet bench's metrics (fleet_tests.bench) on synthetic inputs and on the geometry of both
+layouts' goals files: crossing a blocked corridor's mouth, the seeded dispatch, obstacles after
+merging and which were robots or walls, and the broker's $SYS byte accounting."""
+import importlib.machinery
+import importlib.util
 import os
 
 import pytest
 import rospkg
 
-from fleet_tests.bench import entered_blocked
+from fleet_tests.bench import (OccupancyIndex, block_rect, broker_bytes, classify_obstacles, crossed_mouth,
+                               dispatch_plan, obstacle_groups, pose_at, rect_gap, sys_message_bytes)
 from fleet_tests.scenario import load_facility
 
 WORLDS = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "worlds")
@@ -17,21 +21,210 @@ def block_and_corridor(goals, name):
     return b, f["corridors"][b["corridor"]]
 
 
+# --- crossing the mouth line of a blocked corridor ---------------------------------------------
+
 @pytest.mark.parametrize("track, expected", [
     ([(0, 13.6, 1.0), (1, 13.6, 8.4)], True),      # drove 5 m up the long corridor, turned 2.5 m before the block
-    ([(0, 13.6, 1.0), (1, 13.6, 4.0)], False),     # 0.6 m into the mouth only
-    ([(0, 13.6, 1.0), (1, 1.9, 2.0), (2, 1.9, 9.0), (3, 13.3, 13.9)], False),   # the detour, then behind the block
+    ([(0, 13.6, 1.0), (1, 13.6, 3.2)], False),     # stopped 0.2 m below the mouth line
+    ([(0, 13.6, 1.0), (1, 13.6, 3.4)], True),      # reached the mouth line
+    ([(0, 15.0, 1.0), (1, 15.0, 3.3), (2, 15.5, 3.5)], False),   # beside the corridor (x > 14.6), not through the mouth
+    ([(0, 1.9, 2.0), (1, 1.9, 9.0), (2, 13.3, 13.9)], False),    # the detour, then behind the block
+    ([(0, 13.3, 13.9), (1, 13.1, 12.0)], False),   # from the goal hall towards the block: not the mouth line
 ])
-def test_deadend(track, expected):
-    block, corridor = block_and_corridor("deadend_goals.yaml", "block_far")
-    assert entered_blocked(track, block, corridor, 2.4) is expected
+def test_deadend_mouth(track, expected):
+    _block, corridor = block_and_corridor("deadend_goals.yaml", "block_far")
+    assert crossed_mouth(track, corridor) is expected
 
 
 @pytest.mark.parametrize("track, expected", [
-    ([(0, 12.07, 2.73)], True),                    # stuck below the right corridor's mouth (Test 1's first stuck)
-    ([(0, 13.6, 1.0), (1, 15.0, 3.0)], False),     # start slots, right of the corridor
-    ([(0, 11.3, 7.3)], False),                     # purple: behind the block, not on the start side
+    ([(0, 12.07, 2.73)], False),                   # Test 1's first stuck, below the right corridor's mouth
+    ([(0, 11.3, 2.0), (1, 11.3, 3.0), (2, 11.3, 2.2)], False),   # 0.4 m short of the mouth, backed off
+    ([(0, 11.3, 3.0), (1, 11.3, 3.6), (2, 11.3, 3.0)], True),    # in by 0.2 m, backed out
+    ([(0, 10.0, 3.0), (1, 12.6, 3.8)], True),      # diagonally: crosses y = 3.4 at x = 11.3
+    ([(0, 9.0, 3.0), (1, 10.2, 3.8)], False),      # diagonally: crosses y = 3.4 at x = 9.6, left of the mouth
+    ([(0, 11.3, 7.3)], False),                     # purple: behind the block
 ])
-def test_facility(track, expected):
-    block, corridor = block_and_corridor("goals.yaml", "block_right")
-    assert entered_blocked(track, block, corridor, 2.4) is expected
+def test_facility_mouth(track, expected):
+    _block, corridor = block_and_corridor("goals.yaml", "block_right")
+    assert crossed_mouth(track, corridor) is expected
+
+
+# --- seeded dispatch ----------------------------------------------------------------------------
+
+def test_dispatch_same_seed_same_plan_and_seeds_differ():
+    assert dispatch_plan(10, 3, 20.0) == dispatch_plan(10, 3, 20.0)
+    plans = {tuple(dispatch_plan(10, s, 20.0)) for s in range(1, 6)}
+    assert len(plans) == 5
+    orders = {tuple(i for i, _w in dispatch_plan(10, s, 20.0)) for s in range(1, 6)}
+    assert len(orders) == 5                         # the order changes with the seed, not only the waits
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 17])
+def test_dispatch_is_a_permutation_with_bounded_waits(seed):
+    plan = dispatch_plan(20, seed, 20.0)
+    assert sorted(i for i, _w in plan) == list(range(20))
+    assert plan[0][1] == 0.0
+    assert all(10.0 <= w <= 30.0 for _i, w in plan[1:])
+    assert dispatch_plan(1, seed, 20.0) == [(0, 0.0)]
+
+
+def test_dispatch_waits_spread_over_the_range():
+    waits = [w for s in range(50) for _i, w in dispatch_plan(5, s, 10.0)[1:]]
+    assert min(waits) < 6.0 and max(waits) > 14.0   # uniform 0.5..1.5 x interval, not a constant
+
+
+# --- obstacles after merging --------------------------------------------------------------------
+
+def test_rect_gap():
+    assert rect_gap((0, 0, 1, 1), (0.5, 0.5, 2, 2)) == 0.0
+    assert rect_gap((0, 0, 1, 1), (1.3, 0, 2, 1)) == pytest.approx(0.3)
+    assert rect_gap((0, 0, 1, 1), (1.3, 1.8, 2, 2)) == pytest.approx(0.8)   # the axis where they lie farthest apart
+
+
+def test_groups_merge_close_live_obstacles_only():
+    msgs = [
+        (10.0, "a", (0.0, 0.0, 1.0, 0.3)),
+        (10.5, "b", (1.3, 0.0, 2.0, 0.3)),          # 0.3 m from a, both alive: merged
+        (11.0, "a", (0.0, 0.0, 1.0, 0.3)),
+        (12.0, "c", (5.0, 5.0, 6.0, 5.3)),          # far away: its own obstacle
+        (200.0, "d", (0.0, 0.0, 1.0, 0.3)),         # same place, but a expired at 71 s: a new obstacle
+        (13.0, "", (0.0, 0.0, 1.0, 1.0)),           # a proposal, no uuid: not an obstacle
+    ]
+    assert obstacle_groups(msgs, 0.5, 60.0) == [["a", "b"], ["c"], ["d"]]
+    assert obstacle_groups(msgs, 0.2, 60.0) == [["a"], ["b"], ["c"], ["d"]]
+    assert obstacle_groups(msgs, 0.5, 600.0) == [["a", "b", "d"], ["c"]]
+
+
+def test_groups_merge_transitively_through_grown_rectangles():
+    msgs = [(0.0, "x", (0.0, 0.0, 1.0, 1.0)), (1.0, "y", (3.0, 0.0, 4.0, 1.0)),
+            (2.0, "y", (1.2, 0.0, 4.0, 1.0))]       # y grew towards x: within 0.5 m
+    assert obstacle_groups(msgs, 0.5, 60.0) == [["x", "y"]]
+
+
+def test_pose_at_interpolates():
+    track = [(0.0, 0.0, 0.0), (1.0, 1.0, 0.0), (2.0, 1.0, 2.0)]
+    assert pose_at(track, 0.5) == pytest.approx((0.5, 0.0))
+    assert pose_at(track, 1.5) == pytest.approx((1.0, 1.0))
+    assert pose_at(track, 2.5) is None and pose_at([], 0.0) is None
+
+
+# --- which obstacles were robots, which walls --------------------------------------------------
+
+def small_map():
+    """10 x 10 cells of 0.1 m at the origin; the bottom row (y 0..0.1) is a wall."""
+    data = [100 if iy == 0 else 0 for iy in range(10) for _ix in range(10)]
+    return OccupancyIndex(10, 10, 0.1, 0.0, 0.0, data)
+
+
+def test_occupancy_near():
+    grid = small_map()
+    assert grid.near(0.55, 0.15, 0.1)          # 0.05 above the wall
+    assert grid.near(0.55, 0.2, 0.1)           # 0.1 above it: on the limit
+    assert not grid.near(0.55, 0.25, 0.1)      # 0.15 above it
+    assert not grid.near(0.55, 0.95, 0.1)
+
+
+def test_classify_robot_wall_block_and_clean():
+    tracks = {"robot_0": [(0.0, 5.0, 5.0), (10.0, 5.0, 5.0)],
+              "robot_1": [(0.0, 2.0, 2.0), (5.0, 2.0, 2.0), (10.0, 3.0, 2.0)]}
+    groups = [["on_robot"], ["on_wall"], ["on_block"], ["clean"], ["own_pose"], ["robot_moved_away"]]
+    walls = small_map()
+    blocks = [block_rect({"pose": [0.5, 0.3, 0.0], "size": [0.2, 0.2]}),    # a block against the wall at x 0.4..0.6
+              block_rect({"pose": [5.0, 9.0, 0.0], "size": [1.0, 0.3]})]    # and one elsewhere
+    cells = [
+        (5.0, "robot_0", "on_robot", [(8.0, 8.0), (2.52, 2.0)]),   # 0.52 m from robot_1: within 0.47 + 0.1
+        (5.0, "robot_0", "on_wall", [(0.85, 0.15)]),              # 0.05 m above the wall, no block there
+        (5.0, "robot_0", "on_block", [(0.5, 0.15)]),              # touches the wall, but on the block
+        (5.0, "robot_0", "clean", [(0.85, 0.25), (2.6, 2.0)]),    # 0.15 m from the wall, 0.6 m from robot_1
+        (5.0, "robot_1", "own_pose", [(2.0, 2.0)]),               # the source's own pose: not another robot
+        (9.0, "robot_0", "robot_moved_away", [(2.0, 2.0)]),       # robot_1 left (2.0, 2.0) by then (x = 2.8)
+    ]
+    evidence = {}
+    kinds = classify_obstacles(groups, cells, tracks, 0.47, walls, blocks, evidence=evidence)
+    assert kinds == {0: (True, False), 1: (False, True), 2: (False, False), 3: (False, False),
+                     4: (False, False), 5: (False, False)}
+    assert evidence == {0: {"robot": [5.0, 2.52, 2.0, "robot_1", 0.52]}, 1: {"wall": [5.0, 0.85, 0.15]}}
+
+
+def test_classify_per_merged_group():
+    tracks = {"robot_0": [(0.0, 5.0, 5.0), (10.0, 5.0, 5.0)], "robot_1": [(0.0, 2.0, 2.0), (10.0, 2.0, 2.0)]}
+    cells = [(1.0, "robot_0", "a", [(8.0, 8.0)]), (2.0, "robot_0", "b", [(2.1, 2.0)])]
+    assert classify_obstacles([["a", "b"]], cells, tracks, 0.47, None) == {0: (True, False)}
+
+
+def test_facility_block_faces_touch_walls_but_are_not_walls():
+    """Why blocks are excluded: block_right reaches 0.1 m into both corridor walls, so a cell of its
+    face at the corridor's side lies within 0.1 m of the map's wall."""
+    f = load_facility(os.path.join(WORLDS, "goals.yaml"))
+    block = f["blocks"]["block_right"]
+    x0, _y0, _x1, _y1 = f["corridors"]["right"]
+    # the facility's walls as the map has them: solid left of the corridor (x < 10.4) at y 3.4..6.8
+    data = [100 if (10.0 + (ix + 0.5) * 0.05) < x0 else 0 for _iy in range(20) for ix in range(40)]
+    walls = OccupancyIndex(40, 20, 0.05, 10.0, 4.6, data)
+    face_cell = (x0 + 0.025, 4.975)                      # the block's lower face, first cell in the corridor
+    assert walls.near(*face_cell, 0.1)
+    kinds = classify_obstacles([["b"]], [(1.0, "robot_0", "b", [face_cell])], {}, 0.47, walls, [block_rect(block)])
+    assert kinds == {0: (False, False)}
+
+
+# --- bytes through the broker ($SYS) -------------------------------------------------------------
+
+def test_sys_message_bytes():
+    assert sys_message_bytes("$SYS/broker/bytes/sent", b"100") == 1 + 1 + 2 + 22 + 3
+    assert sys_message_bytes("t", b"x" * 200) == 1 + 2 + 2 + 1 + 200     # remaining length needs 2 bytes
+
+
+def test_broker_bytes_per_robot_per_simulated_minute():
+    base = (1000, 500, 100.0)                # sent, received, simulated s
+    end = (61000, 12500, 220.0)              # 2 simulated minutes later
+    b = broker_bytes(base, end, 5, own_bytes=0)
+    assert (b["sent"], b["received"], b["total"]) == (60000, 12000, 72000)
+    assert b["sim_minutes"] == pytest.approx(2.0)
+    assert b["per_robot_per_minute"] == pytest.approx(72000 / 5 / 2.0)
+    mine = broker_bytes(base, end, 5, own_bytes=1000)     # the bench's own $SYS subscription is not the fleet's
+    assert mine["sent"] == 59000 and mine["total"] == 71000
+
+
+def test_broker_bytes_refuses_a_restarted_broker():
+    with pytest.raises(ValueError):
+        broker_bytes((1000, 500, 0.0), (10, 600, 60.0), 2)
+
+
+# --- the settings printed beside the table --------------------------------------------------------
+
+def load_bench_fleet():
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts", "bench_fleet")
+    loader = importlib.machinery.SourceFileLoader("bench_fleet_script", path)
+    spec = importlib.util.spec_from_loader(loader.name, loader)
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module
+
+
+def test_non_defaults_lists_only_what_differs():
+    bf = load_bench_fleet()
+    got = bf.nav_non_defaults({"controller_frequency": 10.0, "stuck_feedback_on_local_failure": False,
+                               "global_costmap": {"raytrace_range": 2.5, "obstacle_range": 2.5},
+                               "sharing": {"plan_trigger": False, "trigger_radius": 1.0}})
+    assert got == [("controller_frequency", 10.0, 20.0), ("global_costmap/raytrace_range", 2.5, 3.0),
+                   ("sharing/plan_trigger", False, True), ("sharing/trigger_radius", 1.0, None)]
+
+
+def test_bench_defaults_are_the_launch_files():
+    bf = load_bench_fleet()
+    assert float(bf.launch_defaults()["obstacle_duration"]) == 60.0
+    args = bf.make_parser().parse_args([])
+    assert args.obstacle_duration == 60 and len(args.seed) >= 3
+    assert bf.non_defaults(args)[-1].startswith("bench: ")            # only the bench's own settings line
+    lines = bf.non_defaults()
+    assert not any("obstacle_duration" in line or "stuck_feedback" in line for line in lines)
+
+
+def test_thesis_nav_params_are_printed_as_non_defaults():
+    bf = load_bench_fleet()
+    path = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "config", "fleet_nav_thesis.yaml")
+    args = bf.make_parser().parse_args(["--nav-params", path])
+    lines = bf.non_defaults(args)
+    assert lines[0].startswith("nav_params: " + path)
+    assert "move_base stuck_feedback_on_local_failure: True (default False)" in lines
+    assert "move_base stuck_feedback_on_local_failure: True (default False)" not in bf.non_defaults()

@@ -77,7 +77,9 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
     (["--layout", "nowhere"], "--layout must be one of facility, deadend, got 'nowhere'"),
     (["--robots", "11"], "robots must be 1..10"),
     (["--seed", "x"], "invalid int value: 'x'"),
-    (["--obstacle-duration", "0"], "--obstacle-duration and --time-limit must be at least 1 s"),
+    (["--obstacle-duration", "0"], "--obstacle-duration must be at least 1 s"),
+    (["--time-limit", "-1"], "--time-limit at least 0"),
+    (["--nav-params", "/nonexistent/nav.yaml"], "--nav-params: /nonexistent/nav.yaml is not a file"),
     (["--summarize", "/nonexistent/bench"], "--summarize: /nonexistent/bench is not a folder"),
     (["--summarize", os.path.dirname(os.path.abspath(__file__))], "no bench results"),
 ])

@@ -29,6 +29,7 @@ from fleet_tests.scenario import load_facility
 WORLDS = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "worlds")
 LAYOUTS = {"facility": "goals.yaml", "deadend": "deadend_goals.yaml"}
 INSCRIBED = 0.345     # fleet_nav's inscribed radius of the pr2 footprint (its start-up log line)
+CLEARANCE = 0.488 + 0.1   # fleet_nav's circumscribed radius of the padded footprint + its clearance_margin
 
 
 def world_path(layout, robots):
@@ -201,3 +202,54 @@ def test_deadend_block_turns_the_straight_way_into_a_long_dead_end():
     assert via_door < 5.0 and back_out > via_door + 2 * 5.0, (via_door, back_out)
     cx0, cy0, cx1, cy1 = desc["corridors"]["long"]
     assert cy1 - cy0 >= 7.5                                # the blocked corridor is long
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_every_robot_can_leave_and_park_whatever_the_dispatch_order(layout):
+    """The bench sends the robots in an order drawn from its seed: with the 9 other robots waiting
+    at their start slots, each robot's centre can reach the top of the open corridor keeping
+    fleet_nav's clearance (circumscribed radius + clearance_margin) from every wall, block and
+    robot; and with bench_goals[0..k-1] taken (farthest first), the k-th robot sent can get from
+    there to bench_goals[k]. Robots as 0.75 m squares (0.65 m body, 0.05 m origin offset either way).
+    (With the inscribed radius instead, a second row of start slots for N = 20 passed here and
+    failed in fleet_nav: robots could not leave between the rows.)"""
+    m = map_of(layout)
+    desc = facility(layout)
+    res = m.resolution
+    occupied, x, y = occupied_world_grid(m)
+    blocked = occupied.copy()
+    for spec in desc["blocks"].values():
+        (bx, by, _yaw), (bsx, bsy) = spec["pose"], spec["size"]
+        blocked |= (abs(x - bx) <= bsx / 2) & (abs(y - by) <= bsy / 2)
+    world = load(layout, 10)
+    starts = [(r.pose[0], r.pose[1]) for r in world.robots]
+    goals = [(g[0], g[1]) for g in desc["bench_goals"]]
+    assert len(starts) == 10 and len(goals) >= 10
+
+    def body(px, py):
+        return (abs(x - px) <= 0.375) & (abs(y - py) <= 0.375)
+
+    def cell(px, py):
+        return int(py / res), int(px / res)
+
+    def connected(grid, a, b):
+        free = ndimage.distance_transform_edt(~grid) * res > CLEARANCE
+        labels, _n = ndimage.label(free, structure=np.ones((3, 3)))
+        return labels[a] != 0 and labels[a] == labels[b]
+
+    blocked_corridors = {spec["corridor"] for spec in desc["blocks"].values()}
+    open_corridors = [c for name, c in desc["corridors"].items() if name not in blocked_corridors]
+    assert open_corridors
+    x0, _y0, x1, y1 = open_corridors[0]
+    exit_cell = cell((x0 + x1) / 2, y1 + 0.5)
+    for k, (sx, sy) in enumerate(starts):
+        grid = blocked.copy()
+        for j, (ox, oy) in enumerate(starts):
+            if j != k:
+                grid |= body(ox, oy)
+        assert connected(grid, cell(sx, sy), exit_cell), "robot_%d cannot leave its start slot" % k
+    for k, (gx, gy) in enumerate(goals[:10]):
+        grid = blocked.copy()
+        for ox, oy in goals[:k]:
+            grid |= body(ox, oy)
+        assert connected(grid, exit_cell, cell(gx, gy)), "bench_goals[%d] cannot be reached" % k

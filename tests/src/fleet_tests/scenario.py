@@ -1,22 +1,25 @@
 """What the fleet scenarios (rostests, demo, bench) observe and do, on one ROS master.
 
-A ``Fleet`` records, per robot: stuck events (sim time and true pose), every message the robot's
-handler sends to (``to_fleet``) and gets from (``from_fleet``) its bridge, every plan, the true
-trajectory, and the latest costmap; it sends move_base goals, changes the simulator's blocks and
-reads the handlers' obstacle lists. Only observation: obstacles travel between robots through
+A ``Fleet`` records, per robot: stuck events (sim time and true pose), recovery behaviours
+announced on ``move_base/recovery_status``, every message the robot's handler sends to
+(``to_fleet``) and gets from (``from_fleet``) its bridge, every plan, the true trajectory, and the
+latest costmap; and the a-priori map (/map). It sends move_base goals, changes the simulator's
+blocks and reads the handlers' obstacle lists. ``BrokerCounters`` reads mosquitto's $SYS byte
+counters. Only observation: obstacles travel between robots through
 MQTT alone (fleet.launch), the test node never forwards anything.
 """
 import math
 import os
 import threading
 import time
+import urllib.parse
 
 import actionlib
 import rospy
 import yaml
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
-from move_base_msgs.msg import MoveBaseAction
+from move_base_msgs.msg import MoveBaseAction, RecoveryStatus
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from std_msgs.msg import Empty, String
 
@@ -85,6 +88,7 @@ class Robot:
         ns = "/" + self.name + "/"
         self.lock = fleet.lock
         self.stuck = []          # (sim time, x, y)
+        self.recoveries = []     # (sim time, x, y, recovery behaviour name) from move_base/recovery_status
         self.to_fleet = []       # (sim time, SharedObstacle)
         self.from_fleet = []     # (sim time, SharedObstacle)
         self.expired = []        # (sim time, uuid)
@@ -98,6 +102,7 @@ class Robot:
         self.distance = 0.0
         self.fleet_robots = ()    # names in the latest fleet_robots of this robot's bridge
         rospy.Subscriber(ns + "stuck_feedback", Empty, self._on_stuck, queue_size=10)
+        rospy.Subscriber(ns + "move_base/recovery_status", RecoveryStatus, self._on_recovery, queue_size=10)
         rospy.Subscriber(ns + "to_fleet", SharedObstacle, self._append(self.to_fleet), queue_size=1000)
         rospy.Subscriber(ns + "from_fleet", SharedObstacle, self._append(self.from_fleet), queue_size=1000)
         rospy.Subscriber(ns + "expired_obstacles", String, self._on_expired, queue_size=100)
@@ -128,6 +133,13 @@ class Robot:
             x, y = self.pose if self.pose else (float("nan"), float("nan"))
             self.stuck.append((rospy.get_time(), x, y))
         rospy.loginfo("scenario: %s stuck at (%.2f, %.2f)", self.name, x, y)
+
+    def _on_recovery(self, msg):
+        with self.lock:
+            x, y = self.pose if self.pose else (float("nan"), float("nan"))
+            self.recoveries.append((rospy.get_time(), x, y, msg.recovery_behavior_name))
+        rospy.loginfo("scenario: %s recovery %d/%d %s at (%.2f, %.2f)", self.name, msg.current_recovery_number + 1,
+                      msg.total_number_of_recoveries, msg.recovery_behavior_name, x, y)
 
     def _on_expired(self, msg):
         with self.lock:
@@ -208,11 +220,17 @@ class Fleet:
         self.lock = threading.Lock()
         self.facility = facility or load_facility()
         self.robots = [Robot(self, i) for i in range(robots)]
+        self.map = None          # the map server's /map (latched): the a-priori map
         self._add = rospy.ServiceProxy("/fleet_sim/add_block", AddBlock)
         self._move = rospy.ServiceProxy("/fleet_sim/move_block", MoveBlock)
         self._remove = rospy.ServiceProxy("/fleet_sim/remove_block", RemoveBlock)
         self._snapshot = rospy.ServiceProxy("/fleet_sim/snapshot", Snapshot)
         rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=100)
+        rospy.Subscriber("/map", OccupancyGrid, self._on_map, queue_size=1)
+
+    def _on_map(self, msg):
+        with self.lock:
+            self.map = msg
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
@@ -316,3 +334,73 @@ def percentile(values, q):
     k = (len(values) - 1) * q / 100.0
     lo, hi = int(math.floor(k)), int(math.ceil(k))
     return values[lo] + (values[hi] - values[lo]) * (k - lo)
+
+
+def sys_message_bytes(topic, payload):
+    """Bytes of one QoS-0 MQTT 3.1.1 PUBLISH on the wire: fixed header (1 + remaining-length
+    bytes), topic length (2), topic, payload."""
+    remaining = 2 + len(topic.encode()) + len(payload)
+    length_bytes = 1
+    while remaining >= 128 ** length_bytes:
+        length_bytes += 1
+    return 1 + length_bytes + remaining
+
+
+class BrokerCounters:
+    """mosquitto's cumulative byte counters, read with a paho client on the broker URL
+    (mqtt://host:port, /fleet/broker_url): $SYS/broker/bytes/sent (everything the broker wrote to
+    its clients: fan-out to every subscriber, MQTT framing, CONNACK/SUBACK/PINGRESP) and
+    $SYS/broker/bytes/received (everything the clients sent it). mosquitto publishes them every
+    sys_interval (10 s wall by default), bytes/received before bytes/sent and each only when it
+    changed; on subscribing the retained values arrive, which may be up to sys_interval old, so a
+    sample is a fresh (not retained) bytes/sent with the bytes/received current at that moment."""
+
+    SENT = "$SYS/broker/bytes/sent"
+    RECEIVED = "$SYS/broker/bytes/received"
+
+    def __init__(self, url):
+        import paho.mqtt.client as mqtt
+        parts = urllib.parse.urlparse(url)
+        self.cond = threading.Condition()
+        self.values = {}
+        self.samples = []    # (wall time, sim time, bytes sent, bytes received), one per fresh publication
+        self.own = []        # (wall time, bytes) of every message this client received
+        self.client = mqtt.Client(client_id="bench_sys_%d" % os.getpid(), clean_session=True)
+        self.client.on_message = self._on_message
+        self.client.connect(parts.hostname, parts.port or 1883, keepalive=60)
+        self.client.subscribe([(self.SENT, 0), (self.RECEIVED, 0)])
+        self.client.loop_start()
+
+    def _on_message(self, _client, _userdata, msg):
+        now = time.time()
+        with self.cond:
+            self.own.append((now, sys_message_bytes(msg.topic, msg.payload)))
+            try:
+                self.values[msg.topic] = int(msg.payload)
+            except ValueError:
+                return
+            if msg.topic == self.SENT and not msg.retain and self.RECEIVED in self.values:
+                self.samples.append((now, rospy.get_time(), self.values[self.SENT], self.values[self.RECEIVED]))
+            self.cond.notify_all()
+
+    def next_sample(self, after, timeout=35.0):
+        """The first sample published after wall time `after` (waits up to timeout wall s)."""
+        end = time.time() + timeout
+        with self.cond:
+            while True:
+                fresh = [s for s in self.samples if s[0] > after]
+                if fresh:
+                    return fresh[0]
+                left = end - time.time()
+                if left <= 0:
+                    raise ScenarioError("no $SYS/broker/bytes publication from the broker in %.0f s" % timeout)
+                self.cond.wait(left)
+
+    def own_bytes(self, start, end):
+        """Bytes of the $SYS messages this client received at wall times in [start, end)."""
+        with self.cond:
+            return sum(n for t, n in self.own if start <= t < end)
+
+    def close(self):
+        self.client.loop_stop()
+        self.client.disconnect()
