@@ -9,6 +9,8 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <tf2/exceptions.h>
 
+#include "sharing_layer/cost_values.h"
+
 PLUGINLIB_EXPORT_CLASS(sharing_layer::SharingLayer, costmap_2d::Layer)
 
 namespace sharing_layer
@@ -73,10 +75,64 @@ Observation toObservation(const costmap_2d::Observation& observation)
 }
 }  // namespace
 
+std::vector<std::string> SharingLayer::adoptParentObservationSources()
+{
+  ros::NodeHandle private_nh("~/" + name_), parent_nh("~");
+  std::vector<std::string> copied;
+  std::string sources;
+  if (private_nh.hasParam("observation_sources") || !parent_nh.getParam("observation_sources", sources))
+  {
+    return copied;
+  }
+  private_nh.setParam("observation_sources", sources);
+  copied.push_back("observation_sources");
+  std::istringstream names(sources);
+  for (std::string source; names >> source;)
+  {
+    XmlRpc::XmlRpcValue dict;
+    if (!private_nh.hasParam(source) && parent_nh.getParam(source, dict))
+    {
+      private_nh.setParam(source, dict);
+      copied.push_back(source);
+    }
+  }
+  for (const char* key : { "obstacle_range", "raytrace_range", "max_obstacle_height", "min_obstacle_height" })
+  {
+    XmlRpc::XmlRpcValue value;
+    if (!private_nh.hasParam(key) && parent_nh.getParam(key, value))
+    {
+      private_nh.setParam(key, value);
+      copied.push_back(key);
+    }
+  }
+  return copied;
+}
+
 void SharingLayer::onInitialize()
 {
+  // Before ObstacleLayer reads them: a layer with no observation source marks nothing and never shares.
+  const std::vector<std::string> adopted = adoptParentObservationSources();
   ObstacleLayer::onInitialize();
   ros::NodeHandle private_nh("~/" + name_);
+  if (!adopted.empty())
+  {
+    std::string names;
+    for (const std::string& name : adopted)
+    {
+      names += (names.empty() ? "" : ", ") + name;
+    }
+    ROS_WARN("SharingLayer %s: no observation_sources in its namespace %s; took them from the costmap's (pre-Hydro "
+             "parameter files, which costmap_2d moves only into a costmap_2d::ObstacleLayer): %s",
+             name_.c_str(), private_nh.getNamespace().c_str(), names.c_str());
+  }
+  std::string own_sources;
+  private_nh.param("observation_sources", own_sources, std::string(""));
+  if (own_sources.find_first_not_of(" \t") == std::string::npos)
+  {
+    ROS_ERROR("SharingLayer %s: no observation source (set %s/observation_sources): this layer marks nothing and "
+              "shares nothing",
+              name_.c_str(), private_nh.getNamespace().c_str());
+  }
   ros::NodeHandle robot_nh;
   global_frame_ = layered_costmap_->getGlobalFrameID();
 
@@ -116,8 +172,11 @@ void SharingLayer::onInitialize()
   inscribed_from_footprint_ = !private_nh.hasParam("inscribed_radius");
   const double footprint_inscribed = layered_costmap_->getInscribedRadius();
   private_nh.param("inscribed_radius", params_.inscribed_radius, footprint_inscribed > 0.0 ? footprint_inscribed : 0.25);
+  // The layer runs inside move_base: its global planner publishes under this node's name, whatever it is
+  // (the tutorials' launch names it move_base_node).
   std::string plan_topics;
-  private_nh.param("plan_topics", plan_topics, std::string("move_base/NavfnROS/plan move_base/GlobalPlanner/plan"));
+  const std::string node = ros::this_node::getName();
+  private_nh.param("plan_topics", plan_topics, node + "/NavfnROS/plan " + node + "/GlobalPlanner/plan");
   std::string map_topic;
   private_nh.param("map_topic", map_topic, std::string("map"));
   std::string robot_name = ros::this_node::getNamespace();
@@ -153,7 +212,14 @@ void SharingLayer::onInitialize()
     if (topic != "none")
     {
       plan_subs_.push_back(robot_nh.subscribe(topic, 1, &SharingLayer::planCallback, this));
+      plan_topics_.push_back(plan_subs_.back().getTopic());
     }
+  }
+  if (!plan_subs_.empty())
+  {
+    // move_base's action server is "move_base" in the robot's namespace, whatever the node's name.
+    goal_status_sub_ = robot_nh.subscribe("move_base/status", 1, &SharingLayer::goalStatusCallback, this);
+    plan_publisher_check_ = robot_nh.createTimer(ros::Duration(15.0), &SharingLayer::checkPlanPublishers, this, true);
   }
   if (!map_topic.empty() && map_topic != "none")
   {
@@ -216,6 +282,11 @@ void SharingLayer::onFootprintChanged()
     return;
   }
   std::lock_guard<std::mutex> lock(core_mutex_);
+  if (inscribed != params_.inscribed_radius)
+  {
+    ROS_INFO("SharingLayer %s (%s): plan trigger within the footprint's inscribed radius %.3f m of the plan",
+             name_.c_str(), params_.robot_name.c_str(), inscribed);
+  }
   params_.inscribed_radius = inscribed;
   if (core_)
   {
@@ -245,12 +316,52 @@ void SharingLayer::recoveryCallback(const ros::MessageEvent<topic_tools::ShapeSh
   stuck_stamp_ = ros::Time::now();
 }
 
+void SharingLayer::goalStatusCallback(const actionlib_msgs::GoalStatusArray::ConstPtr& msg)
+{
+  bool active = false;
+  for (const actionlib_msgs::GoalStatus& status : msg->status_list)
+  {
+    active |= status.status == actionlib_msgs::GoalStatus::PENDING ||
+              status.status == actionlib_msgs::GoalStatus::ACTIVE ||
+              status.status == actionlib_msgs::GoalStatus::PREEMPTING;
+  }
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  if (goal_active_ && !active && core_)
+  {
+    core_->setPlan({});  // the goal ended: its plan no longer says where the robot is going
+  }
+  goal_active_ = active;
+}
+
+void SharingLayer::checkPlanPublishers(const ros::TimerEvent&)
+{
+  for (const ros::Subscriber& sub : plan_subs_)
+  {
+    if (sub.getNumPublishers() > 0)
+    {
+      return;
+    }
+  }
+  std::string topics;
+  for (const std::string& topic : plan_topics_)
+  {
+    topics += (topics.empty() ? "" : " ") + topic;
+  }
+  ROS_WARN("SharingLayer %s (%s): nothing publishes the global plan on [%s] after 15 s: the plan-blocked trigger "
+           "is off until something does (set ~%s/plan_topics to your planner's plan topic)",
+           name_.c_str(), params_.robot_name.c_str(), topics.c_str(), name_.c_str());
+}
+
 void SharingLayer::planCallback(const nav_msgs::Path::ConstPtr& msg)
 {
   std::lock_guard<std::mutex> lock(core_mutex_);
   if (!core_)
   {
     return;
+  }
+  if (!goal_active_)
+  {
+    return;  // a make_plan request while move_base has no goal: not where this robot is going
   }
   const std::string frame = msg->header.frame_id.empty() || msg->header.frame_id[0] != '/' ?
                                 msg->header.frame_id :
@@ -557,6 +668,42 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
       break;
   }
   core_->drawShared(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY());
+}
+
+void SharingLayer::clearArea(int start_x, int start_y, int end_x, int end_y, bool invert_area)
+{
+  ObstacleLayer::clearArea(start_x, start_y, end_x, end_y, invert_area);
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  if (!core_)
+  {
+    return;
+  }
+  std::size_t cleared = 0;
+  if (!invert_area)
+  {
+    cleared = core_->clearObstaclesOutside(start_x, start_y, end_x, end_y);
+  }
+  else
+  {
+    // Inside the open window only (clear_costmap_recovery with invert_area_to_clear): the cells there, one by
+    // one; the shareable set drops them at the next scan, as they are no longer lethal.
+    const GridGeometry& g = core_->geometry();
+    CostGrid& grid = core_->obstacleGrid();
+    for (int y = std::max(0, start_y + 1); y < std::min(static_cast<int>(g.size_y), end_y); ++y)
+    {
+      for (int x = std::max(0, start_x + 1); x < std::min(static_cast<int>(g.size_x), end_x); ++x)
+      {
+        const std::uint32_t index = g.getIndex(static_cast<unsigned int>(x), static_cast<unsigned int>(y));
+        if (grid.at(index) == sharing_layer::LETHAL_OBSTACLE)
+        {
+          ++cleared;
+        }
+        grid.set(index, grid.defaultValue());
+      }
+    }
+  }
+  ROS_INFO("SharingLayer (%s): clearArea cleared %zu obstacle cell(s) of its own; shared obstacles stay",
+           params_.robot_name.c_str(), cleared);
 }
 
 void SharingLayer::reset()

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include <actionlib_msgs/GoalStatusArray.h>
 #include <costmap_2d/obstacle_layer.h>
 #include <nav_msgs/OccupancyGrid.h>
 #include <nav_msgs/Path.h>
@@ -28,8 +29,8 @@ namespace sharing_layer
  * Topics (in the robot's namespace): subscribes stuck_feedback (std_msgs/Empty),
  * move_base/recovery_status (any type: each message counts as a stuck signal), shared_obstacles
  * (sharing_msgs/SharedObstacle), expired_obstacles (std_msgs/String), the global plan (nav_msgs/Path,
- * ~plan_topics, default move_base/NavfnROS/plan and move_base/GlobalPlanner/plan) for the plan-blocked
- * trigger, the a-priori map (nav_msgs/OccupancyGrid, ~map_topic, default map) for its unknown cells, and
+ * ~plan_topics, default <this node>/NavfnROS/plan and <this node>/GlobalPlanner/plan) for the plan-blocked
+ * trigger while move_base/status has an active goal, the a-priori map (nav_msgs/OccupancyGrid, ~map_topic, default map) for its unknown cells, and
  * the fleet robots its Coaty bridge hears (sharing_msgs/RobotFootprintArray, ~fleet_robots_topic, default
  * fleet_robots), whose footprints plus ~robot_exclusion_margin are never shared;
  * publishes obstacle_proposals and obstacle_updates (sharing_msgs/SharedObstacle). Every trigger is logged
@@ -48,6 +49,10 @@ public:
   void reset() override;
   void matchSize() override;
   void onFootprintChanged() override;
+  /// @brief What clear_costmap_recovery calls (CostmapLayer::clearArea): the layer's own obstacle marks outside
+  /// the window (or inside it, with invert_area) are cleared in the core too, which would otherwise draw them
+  /// back in the next updateCosts; shared obstacles stay.
+  void clearArea(int start_x, int start_y, int end_x, int end_y, bool invert_area = false) override;
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
@@ -57,6 +62,15 @@ private:
   void planCallback(const nav_msgs::Path::ConstPtr& msg);
   void mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg);
   void fleetRobotsCallback(const sharing_msgs::RobotFootprintArray::ConstPtr& msg);
+  /// @brief move_base's action status: the plan trigger follows the global plan only while a goal is active
+  /// (navfn also publishes the plans of make_plan service calls on the same topic).
+  void goalStatusCallback(const actionlib_msgs::GoalStatusArray::ConstPtr& msg);
+  /// @brief With the tutorials' pre-Hydro files the observation sources sit in the costmap's namespace, and
+  /// costmap_2d copies them only into a plugin of type costmap_2d::ObstacleLayer: copy them here (with a
+  /// WARN naming them) so that the layer is not blind. @return the names copied
+  std::vector<std::string> adoptParentObservationSources();
+  /// @brief WARN once when no plan topic has a publisher: the plan trigger would be silently off.
+  void checkPlanPublishers(const ros::TimerEvent&);
   /// @brief Hands the last fleet_robots message to the core, in the global frame; core_mutex_ held.
   void applyFleetRobots();
   /// @brief Publishes a trigger's proposals and logs it; call with core_mutex_ held.
@@ -89,6 +103,10 @@ private:
   ros::Subscriber shared_sub_;
   ros::Subscriber expired_sub_;
   std::vector<ros::Subscriber> plan_subs_;
+  std::vector<std::string> plan_topics_;
+  ros::Subscriber goal_status_sub_;
+  ros::Timer plan_publisher_check_;
+  bool goal_active_ = true;  ///< until move_base's status says otherwise (none heard: follow every plan)
   ros::Subscriber map_sub_;
   ros::Subscriber fleet_robots_sub_;
 };
