@@ -291,11 +291,15 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     }
   }
 
-  // Cells this scan will mark that are not lethal now: the "newly marked" cells of the plan trigger.
+  // Cells this scan will mark that are not lethal now: the "newly marked" cells of the plan trigger. Also the
+  // endpoints between obstacle_range and raytrace_range: the rest of a face whose middle the plan trigger fires
+  // on (see checkPlan).
   std::vector<std::uint32_t> not_lethal_before;
+  last_far_hits_.clear();
   if (!plan_.empty())
   {
     const double sq_range = params_.limits.obstacle_range * params_.limits.obstacle_range;
+    const double sq_far = params_.limits.raytrace_range * params_.limits.raytrace_range;
     const ScanLimits& l = params_.limits;
     for (const Point3& p : observation.points)
     {
@@ -305,8 +309,14 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         continue;
       }
       const double dz = p.z - observation.origin.z;
-      if ((p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz >= sq_range)
+      const double d_sq = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz;
+      if (d_sq >= sq_range)
       {
+        unsigned int mx = 0, my = 0;
+        if (d_sq < sq_far && g.worldToMap(p.x, p.y, mx, my))
+        {
+          last_far_hits_.push_back(g.getIndex(mx, my));
+        }
         continue;
       }
       unsigned int mx = 0, my = 0;
@@ -782,6 +792,7 @@ void SharingCore::setPlan(const std::vector<std::pair<double, double>>& poses)
   if (plan_.empty())
   {
     last_new_marked_.clear();
+    last_far_hits_.clear();
   }
 }
 
@@ -910,8 +921,21 @@ TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_
     report.message += "nothing proposed: they lie in obstacles already shared";
     return report;
   }
-  // The clusters of candidate cells that touch the plan ahead.
-  const std::vector<std::uint32_t> cells = candidates(robot_x, robot_y, true);
+  // The clusters of candidate cells that touch the plan ahead. The trigger fires on the first cells of a block
+  // within obstacle_range, and navfn's detour may keep the robot from ever marking the rest of its face: the
+  // endpoints the same scan saw beyond obstacle_range (within raytrace_range) join the clusters they touch,
+  // so a corridor the block closes is closed for the peers too. Walls, unknown map cells, shared obstacles and
+  // fleet robots stay out, as for marked cells.
+  std::vector<std::uint32_t> cells = candidates(robot_x, robot_y, true);
+  for (std::uint32_t index : last_far_hits_)
+  {
+    if (!static_filter_.isStatic(index) && !insideMonitoredRectangle(index) && !fleet_robots_.excludes(index))
+    {
+      cells.push_back(index);
+    }
+  }
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
   for (Proposal& proposal : proposeByClusters(g, cells, params_.cluster_gap, params_.min_cluster_cells,
                                               params_.rectangle_padding))
   {
@@ -1221,6 +1245,7 @@ void SharingCore::resetObstacleLayer()
   // newly marked cells); shared obstacles and their monitoring state stay.
   memory_.clear();
   last_new_marked_.clear();
+  last_far_hits_.clear();
   last_static_marked_ = 0;
   last_robot_marked_.clear();
   last_origin_x_ = last_origin_y_ = std::numeric_limits<double>::quiet_NaN();

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "sharing_layer/cost_values.h"
 #include "sharing_layer/sharing_core.h"
 #include "sim_scan.h"
 
@@ -236,4 +237,38 @@ TEST(Growing, NeitherWallsNorSeparateObjectsJoin)
   {
     EXPECT_LE(index / g.size_x, 110u) << "a cell of the other box joined the block";
   }
+}
+
+TEST(PlanTrigger, ABlockFirstSeenAtObstacleRangeIsProposedWithTheFaceSeenBeyondIt)
+{
+  // A 3 m face 2.47 m ahead of the laser: its middle is within obstacle_range (2.5 m), its ends 2.5-2.9 m away
+  // are beam endpoints the laser sees but costmap_2d does not mark. navfn's detour may keep the robot from ever
+  // marking them: the plan trigger's cluster takes them along, so the whole face is shared.
+  SimWorld world = walledWorld();
+  world.box(5.02, 3.5, 5.3, 6.5);
+  SharingCore core = makeCore();
+  std::vector<std::pair<double, double>> plan;
+  for (double x = 2.55; x <= 8.0; x += 0.05)
+  {
+    plan.emplace_back(x, 5.0);
+  }
+  core.setPlan(plan);
+  core.processScan(world.scan(2.55, 5.0, 0.0), 1.0);
+  const TriggerReport report = core.checkPlan(2.55, 5.0, 1.0);
+  ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
+  ASSERT_EQ(1u, report.proposals.size()) << report.message;
+  const Subsection& r = report.proposals[0].rectangle;
+  EXPECT_LE(r.min_y, 3.65) << report.message;
+  EXPECT_GE(r.max_y, 6.35) << report.message;
+  const GridGeometry g = grid();
+  for (std::uint32_t index : report.proposals[0].cells)
+  {
+    double x = 0.0, y = 0.0;
+    g.mapToWorld(index % g.size_x, index / g.size_x, x, y);
+    EXPECT_TRUE(x > 4.95 && x < 5.35 && y > 3.45 && y < 6.55) << "cell (" << x << ", " << y << ") is not the face";
+  }
+  // The obstacle grid keeps costmap_2d's rule: only the middle is marked.
+  unsigned int mx = 0, my = 0;
+  ASSERT_TRUE(g.worldToMap(5.04, 3.6, mx, my));
+  EXPECT_NE(LETHAL_OBSTACLE, core.obstacleGrid().at(g.getIndex(mx, my)));
 }

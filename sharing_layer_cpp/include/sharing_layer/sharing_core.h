@@ -305,6 +305,7 @@ private:
   std::unordered_map<std::uint32_t, RememberedCell> memory_;
   std::vector<std::pair<double, double>> plan_;
   std::vector<std::uint32_t> last_new_marked_;  ///< non-static cells the last scan marked that were not lethal before
+  std::vector<std::uint32_t> last_far_hits_;    ///< endpoints of the last scan beyond obstacle_range, within raytrace_range
   std::size_t last_static_marked_ = 0;          ///< static cells the last scan marked
   double last_scan_time_ = 0.0;
   double last_origin_x_ = 0.0;  ///< sensor origin of the last scan (NaN before the first)
