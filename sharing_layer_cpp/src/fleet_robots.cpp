@@ -90,10 +90,67 @@ void FleetRobots::count(const std::vector<std::uint32_t>& cells, int delta)
   }
 }
 
+namespace
+{
+/// Largest move (m) between two footprints of one robot taken as driving; a longer one is a jump (relocalised,
+/// restarted) and is not extrapolated.
+constexpr double kMaxExtrapolatedMove = 2.0;
+
+std::pair<double, double> centroid(const std::vector<std::pair<double, double>>& polygon)
+{
+  double x = 0.0, y = 0.0;
+  for (const auto& p : polygon)
+  {
+    x += p.first;
+    y += p.second;
+  }
+  return { x / polygon.size(), y / polygon.size() };
+}
+}  // namespace
+
 void FleetRobots::update(const FleetRobot& robot)
+{
+  const auto known = robots_.find(robot.name);
+  const auto motion = motion_.find(robot.name);
+  update(robot, known == robots_.end() ? nullptr : &known->second,
+         motion == motion_.end() ? std::make_pair(0.0, 0.0) : motion->second);
+}
+
+void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, std::pair<double, double> motion)
 {
   check(robot);
   std::vector<std::uint32_t> cells = rasterize(geometry_, robot.footprint, params_.margin);
+  // A driving robot is where its next advert will put it before that advert arrives: the footprint moved
+  // on by as much as it moved since the previous advert is excluded too (the cells a moving robot's front
+  // covers until the next refresh, else marked and shared as an obstacle). The same advert passed on again
+  // (same stamp) keeps the motion; a new advert from a robot that stood still ends it.
+  if (previous != nullptr && !previous->footprint.empty() && previous->stamp != robot.stamp)
+  {
+    const auto now = centroid(robot.footprint), before = centroid(previous->footprint);
+    motion = { now.first - before.first, now.second - before.second };
+  }
+  const double moved = std::hypot(motion.first, motion.second);
+  if (!(moved > 0.5 * geometry_.resolution && moved <= kMaxExtrapolatedMove))
+  {
+    motion = { 0.0, 0.0 };
+  }
+  motion_[robot.name] = motion;
+  {
+    const double dx = motion.first, dy = motion.second;
+    if (dx != 0.0 || dy != 0.0)
+    {
+      std::vector<std::pair<double, double>> ahead(robot.footprint);
+      for (auto& p : ahead)
+      {
+        p.first += dx;
+        p.second += dy;
+      }
+      std::vector<std::uint32_t> more = rasterize(geometry_, ahead, params_.margin);
+      cells.insert(cells.end(), more.begin(), more.end());
+      std::sort(cells.begin(), cells.end());
+      cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    }
+  }
   auto found = cells_.find(robot.name);
   if (found != cells_.end())
   {
@@ -110,10 +167,15 @@ void FleetRobots::replaceAll(const std::vector<FleetRobot>& robots)
   {
     check(robot);
   }
+  const std::map<std::string, FleetRobot> previous = robots_;
+  const std::map<std::string, std::pair<double, double>> motions = motion_;
   clear();
   for (const FleetRobot& robot : robots)
   {
-    update(robot);
+    const auto known = previous.find(robot.name);
+    const auto motion = motions.find(robot.name);
+    update(robot, known == previous.end() ? nullptr : &known->second,
+           motion == motions.end() ? std::make_pair(0.0, 0.0) : motion->second);
   }
 }
 
@@ -127,6 +189,7 @@ bool FleetRobots::forget(const std::string& name)
   count(found->second, -1);
   cells_.erase(found);
   robots_.erase(name);
+  motion_.erase(name);
   return true;
 }
 
@@ -138,6 +201,7 @@ void FleetRobots::clear()
   }
   cells_.clear();
   robots_.clear();
+  motion_.clear();
 }
 
 std::vector<std::string> FleetRobots::expire(double now_s)

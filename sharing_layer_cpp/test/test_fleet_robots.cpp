@@ -173,6 +173,30 @@ TEST(FleetRobotsTable, MovesReplacesExpiresAndOverlaps)
   EXPECT_EQ(FleetRobots::rasterize(g, square(3.0, 3.0), 0.0), robots.excludedCells());
 }
 
+TEST(FleetRobotsTable, ADrivingRobotsFrontIsCoveredUntilItsNextAdvert)
+{
+  // Adverts come at 2 Hz: a robot driving at 0.5 m/s is up to 0.25 m (plus transit) ahead of its last one, and
+  // the cells its front covers there were shared as an obstacle in the fleet bench. The move between its last
+  // two adverts is excluded once more ahead.
+  const GridGeometry g = grid();
+  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0 });
+  unsigned int mx = 0, my = 0;
+  ASSERT_TRUE(g.worldToMap(3.0 + 0.325 + 0.2 + 0.1, 2.0, mx, my));  // 0.1 m beyond footprint + margin, ahead
+  const std::uint32_t ahead = g.getIndex(mx, my);
+  robots.replaceAll({ robot("robot_1", square(2.75, 2.0), 10.0) });
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 10.5) });  // drove 0.25 m along +x
+  EXPECT_TRUE(robots.excludes(ahead)) << "the cells the robot drives into before its next advert";
+  ASSERT_TRUE(g.worldToMap(3.0 - 0.325 - 0.2 - 0.1, 2.0, mx, my));
+  EXPECT_FALSE(robots.excludes(g.getIndex(mx, my))) << "nothing is extrapolated backwards";
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 10.5) });  // the same advert passed on again
+  EXPECT_TRUE(robots.excludes(ahead));
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 11.0) });  // a new advert: it stopped
+  EXPECT_FALSE(robots.excludes(ahead));
+  EXPECT_EQ(FleetRobots::rasterize(g, square(3.0, 2.0), 0.2), robots.excludedCells());
+  robots.update(robot("robot_1", square(6.0, 2.0), 11.5));  // a 3 m jump (relocalised): not extrapolated
+  EXPECT_EQ(FleetRobots::rasterize(g, square(6.0, 2.0), 0.2), robots.excludedCells());
+}
+
 TEST(FleetRobotsCore, StuckTriggerDoesNotShareAWaitingRobot)
 {
   Scene scene;

@@ -58,6 +58,9 @@ public:
    * wider than kMaxFootprintExtent.
    */
   void update(const FleetRobot& robot);
+  /// @brief As update(robot); when the robot moved since `previous` (its last known footprint), the footprint
+  /// moved on by as much is excluded too, so a driving robot's front is covered until its next refresh.
+  void update(const FleetRobot& robot, const FleetRobot* previous, std::pair<double, double> motion);
 
   /**
    * @brief The whole known set at once (a fleet_robots message): robots not in it are forgotten.
@@ -102,6 +105,7 @@ private:
   FleetRobotParams params_;
   std::map<std::string, FleetRobot> robots_;
   std::map<std::string, std::vector<std::uint32_t>> cells_;   ///< per robot: the cells it excludes
+  std::map<std::string, std::pair<double, double>> motion_;   ///< per robot: its move between its last two adverts
   std::vector<std::uint16_t> count_;  ///< per cell: how many robots cover it (allocated on the first robot)
 };
 
