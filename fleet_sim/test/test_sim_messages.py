@@ -43,6 +43,10 @@ def test_room_messages_have_stage_ros_names_and_geometry():
                         ("map", "robot_0/odom"), ("robot_1/odom", "robot_1/base_link"),
                         ("robot_1/base_link", "robot_1/base_laser_link"), ("map", "robot_1/odom")}
     assert tfs[("robot_0/base_link", "robot_0/base_laser_link")].translation.x == pytest.approx(0.1)
+    # stage_ros's height: the robot model's size z plus the ranger's pose z (costmap_2d filters by height)
+    spec = sim.robots[0].spec
+    assert tfs[("robot_0/base_link", "robot_0/base_laser_link")].translation.z == pytest.approx(
+        spec.height + spec.rangers[0].z)
     assert tfs[("map", "robot_0/odom")].translation.x == pytest.approx(5.0)
     assert tfs[("map", "robot_1/odom")].translation.x == pytest.approx(5.2)     # the configured error
     no_scans = build_messages(sim, names, rospy.Time.from_sec(sim.time), False)

@@ -30,6 +30,9 @@ def test_willow_world_loads_as_written():
     assert math.degrees(laser.fov) == pytest.approx(270.25)
     assert laser.range_max == pytest.approx(30.0)                       # range_max honoured
     assert laser.pose == pytest.approx((0.275, 0.0, 0.0))
+    # stage_ros publishes base_link -> base_laser_link at z 0.25 here (the recorded bag's /tf): the pr2's
+    # size z 0.25 plus the ranger's pose z 0
+    assert r0.height == pytest.approx(0.25) and laser.z == pytest.approx(0.0)
     (fp,) = w.floorplans
     assert fp.name == "willow" and fp.boundary
     assert fp.pose == pytest.approx((-26.3, 29.2, math.pi / 2))

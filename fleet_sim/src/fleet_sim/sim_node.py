@@ -72,12 +72,13 @@ def _number_param(name, default, minimum):
     return number
 
 
-def _tf(stamp, parent, child, t):
+def _tf(stamp, parent, child, t, z=0.0):
     msg = TransformStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = parent
     msg.child_frame_id = child
     msg.transform.translation.x, msg.transform.translation.y = t[0], t[1]
+    msg.transform.translation.z = z
     q = yaw_quaternion(t[2])
     (msg.transform.rotation.x, msg.transform.rotation.y,
      msg.transform.rotation.z, msg.transform.rotation.w) = q
@@ -298,7 +299,8 @@ def build_messages(sim, names, stamp, with_scans):
         scans = []
         for k, ranger in enumerate(r.spec.rangers):
             link = ns + ("base_laser_link_%d" % k if several else "base_laser_link")
-            transforms.append(_tf(stamp, ns + "base_link", link, ranger.pose))
+            # As stage_ros: the laser on top of the robot model (size z) plus its own pose z.
+            transforms.append(_tf(stamp, ns + "base_link", link, ranger.pose, r.spec.height + ranger.z))
             if with_scans and k < len(r.scans):
                 scan = LaserScan()
                 scan.header.stamp = stamp

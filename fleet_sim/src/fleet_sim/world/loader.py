@@ -212,11 +212,12 @@ class _Ctx:
         self.world.robots.append(RobotSpec(
             name=name, pose=pose, size=size, origin=(origin[0], origin[1]),
             color=_color(ent, (255, 0, 0), self.log), drive=drive, rangers=tuple(rangers),
-            where=ent.where()))
+            where=ent.where(), height=_height(ent)))
 
     def load_ranger(self, ent, label):
         self.debug_unused(ent, _USED[ent.type])
         pose = _pose(ent)
+        z = _pose_z(ent)
         sensors = [c for c in ent.children if c.type == "sensor"]
         if ent.type == "laser":
             src = ent
@@ -228,6 +229,7 @@ class _Ctx:
                          "is published" % (ent.where(), ent.kind, len(sensors)))
             self.debug_unused(src, _USED["sensor"])
             pose = frames.compose(pose, _pose(src))
+            z += _pose_z(src)
             defaults = dict(range_min=STAGE_DEFAULT_RANGE[0], range_max=STAGE_DEFAULT_RANGE[1],
                             fov=STAGE_DEFAULT_FOV_DEG, samples=1)
         elif any(k in ent.props for k in ("range", "range_max", "samples", "fov")):
@@ -266,7 +268,7 @@ class _Ctx:
             where = src.props.get("range_max") or src.props.get("range") or src
             raise _Drop(where, "range must satisfy 0 <= min < max, got [%g %g]" % (rmin, rmax))
         return RangerSpec(name=label, pose=pose, range_min=float(rmin), range_max=float(rmax),
-                          fov=math.radians(fov_deg), samples=int(samples), where=ent.where())
+                          fov=math.radians(fov_deg), samples=int(samples), where=ent.where(), z=z)
 
 
 def _label(ent):
@@ -324,6 +326,19 @@ def _pose(ent):
     v = _tuple(ent, "pose", (0.0, 0.0, 0.0, 0.0), (3, 4))
     yaw = v[3] if len(v) == 4 else v[2]
     return (v[0], v[1], frames.normalize_angle(math.radians(yaw)))
+
+
+def _pose_z(ent):
+    """The z of a Stage 4 pose [x y z yaw_deg] (0 for a Stage 3 pose [x y yaw_deg])."""
+    v = _tuple(ent, "pose", (0.0, 0.0, 0.0, 0.0), (3, 4))
+    return float(v[2]) if len(v) == 4 else 0.0
+
+
+def _height(ent):
+    """Stage size z of a model ([x y z]); 0 for a Stage 3 size [x y]. stage_ros puts a robot's lasers this
+    high (plus their own pose z): costmap_2d's min_obstacle_height drops points below it."""
+    v = _tuple(ent, "size", (0.4, 0.4, 1.0), (2, 3))
+    return float(v[2]) if len(v) == 3 else 0.0
 
 
 def _size(ent):

@@ -19,6 +19,7 @@ class RangerSpec:
     fov: float                # radians
     samples: int
     where: str = ""           # file:line of the ranger, for log lines
+    z: float = 0.0            # height above the top of the robot (Stage pose z of the ranger and its sensor)
 
     def __post_init__(self):
         if not (isinstance(self.samples, int) and self.samples >= 1):
@@ -57,6 +58,7 @@ class RobotSpec:
     drive: str                           # 'diff' or 'omni'
     rangers: Tuple[RangerSpec, ...]
     where: str = ""
+    height: float = 0.0                  # Stage size z: a ranger sits on top, as stage_ros publishes it
 
     def __post_init__(self):
         if self.drive not in ("diff", "omni"):
