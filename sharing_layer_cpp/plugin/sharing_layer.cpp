@@ -77,7 +77,9 @@ Observation toObservation(const costmap_2d::Observation& observation)
 
 std::vector<std::string> SharingLayer::adoptParentObservationSources()
 {
-  ros::NodeHandle private_nh("~/" + name_), parent_nh("~");
+  // name_ is "<costmap>/<layer>" (e.g. global_costmap/sharing_layer): the costmap's namespace is its parent.
+  const std::size_t slash = name_.rfind('/');
+  ros::NodeHandle private_nh("~/" + name_), parent_nh(slash == std::string::npos ? "~" : "~/" + name_.substr(0, slash));
   std::vector<std::string> copied;
   std::string sources;
   if (private_nh.hasParam("observation_sources") || !parent_nh.getParam("observation_sources", sources))
