@@ -4,7 +4,9 @@
 #define SHARING_LAYER_TEST_SIM_SCAN_H
 
 #include <cmath>
+#include <algorithm>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "sharing_layer/cost_values.h"
@@ -140,6 +142,34 @@ inline SharingCore makeCore(const LayerParams& p = defaults())
   const std::vector<std::uint8_t> costs = staticMap();
   core.setStaticMap(costs.data(), costs.size());
   return core;
+}
+
+/// An obstacle on grid() as a handler hands it to the layer (a first share is version 1).
+inline ObstacleUpdate sharedUpdate(const std::string& uuid, const std::vector<std::uint32_t>& marked,
+                                   const Subsection& rectangle, std::uint64_t version = 1,
+                                   const std::string& source = "robot_1", std::uint32_t deadline = 60)
+{
+  ObstacleUpdate u;
+  u.uuid = uuid;
+  u.marked = marked;
+  u.rectangle = rectangle;
+  u.deadline = deadline;
+  u.source = source;
+  u.geometry = grid();
+  u.version = version;
+  return u;
+}
+
+/// Cells of a proposal list, all together, sorted.
+inline std::vector<std::uint32_t> allCells(const std::vector<Proposal>& proposals)
+{
+  std::vector<std::uint32_t> cells;
+  for (const Proposal& p : proposals)
+  {
+    cells.insert(cells.end(), p.cells.begin(), p.cells.end());
+  }
+  std::sort(cells.begin(), cells.end());
+  return cells;
 }
 }  // namespace test
 }  // namespace sharing_layer

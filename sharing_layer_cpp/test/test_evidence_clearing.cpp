@@ -38,14 +38,8 @@ std::vector<std::uint32_t> shareBlock(SharingCore& core, const SimWorld& world)
     ADD_FAILURE() << "expected one proposal (the block), got " << report.message;
     return {};
   }
-  ObstacleUpdate authorised;
-  authorised.uuid = "block";
-  authorised.marked = report.proposals[0].cells;
-  authorised.rectangle = report.proposals[0].rectangle;
-  authorised.deadline = 600;
-  authorised.source = "robot_0";
-  authorised.geometry = core.geometry();
-  authorised.version = 1;
+  const ObstacleUpdate authorised =
+      sharedUpdate("block", report.proposals[0].cells, report.proposals[0].rectangle, 1, "robot_0", 600);
   EXPECT_TRUE(core.applyShared(authorised, 1.0).ok);
   return authorised.marked;
 }

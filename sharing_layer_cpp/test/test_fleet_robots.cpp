@@ -20,17 +20,6 @@ namespace
 {
 using Polygon = std::vector<std::pair<double, double>>;
 
-std::vector<std::uint32_t> allCells(const std::vector<Proposal>& proposals)
-{
-  std::vector<std::uint32_t> cells;
-  for (const Proposal& p : proposals)
-  {
-    cells.insert(cells.end(), p.cells.begin(), p.cells.end());
-  }
-  std::sort(cells.begin(), cells.end());
-  return cells;
-}
-
 /// Cells whose centre lies in [x0, x1] x [y0, y1].
 std::size_t countWithin(const std::vector<std::uint32_t>& cells, double x0, double y0, double x1, double y1)
 {
@@ -314,15 +303,9 @@ TEST(FleetRobotsCore, MonitoringUpdatesDoNotMarkARobotInsideASharedRectangle)
   world.box(5.18, 3.68, 5.82, 4.32);  // robot_1, centred at (5.5, 4.0), inside the rectangle
   const GridGeometry g = grid();
   const auto apply = [&](SharingCore& core) {
-    ObstacleUpdate u;
-    u.uuid = "block";
-    u.rectangle = Subsection(3.9, 3.5, 6.1, 4.9);
-    u.marked = { g.getIndex(100, 92) };
-    u.deadline = 60;
-    u.source = "robot_2";
-    u.geometry = g;
-    u.version = 1;
-    ASSERT_TRUE(core.applyShared(u, 1.0).ok);
+    ASSERT_TRUE(
+        core.applyShared(sharedUpdate("block", { g.getIndex(100, 92) }, Subsection(3.9, 3.5, 6.1, 4.9), 1, "robot_2"), 1.0)
+            .ok);
   };
   const auto marked = [&](SharingCore& core) {
     std::vector<std::uint32_t> cells;

@@ -25,20 +25,6 @@ SimWorld blockWorld()
   return world;
 }
 
-ObstacleUpdate shared(const std::string& uuid, const std::vector<std::uint32_t>& cells, const Subsection& rectangle,
-                      std::uint64_t version, const std::string& source)
-{
-  ObstacleUpdate u;
-  u.uuid = uuid;
-  u.marked = cells;
-  u.rectangle = rectangle;
-  u.deadline = 60;
-  u.source = source;
-  u.geometry = grid();
-  u.version = version;
-  return u;
-}
-
 /// Robot_0 at (3.6, 5.0) sees the block's face and proposes it; it is authorised at t = 1 s.
 std::vector<std::uint32_t> shareFace(SharingCore& core, const SimWorld& world)
 {
@@ -49,7 +35,7 @@ std::vector<std::uint32_t> shareFace(SharingCore& core, const SimWorld& world)
   {
     return {};
   }
-  EXPECT_TRUE(core.applyShared(shared("block", report.proposals[0].cells, report.proposals[0].rectangle, 1, "robot_0"),
+  EXPECT_TRUE(core.applyShared(sharedUpdate("block", report.proposals[0].cells, report.proposals[0].rectangle, 1, "robot_0"),
                                1.0)
                   .ok);
   return report.proposals[0].cells;
@@ -92,7 +78,7 @@ TEST(Leases, AnotherRobotsObservationResetsTheInterval)
   const std::vector<std::uint32_t> face = shareFace(core, world);
   ASSERT_FALSE(face.empty());
   // robot_1 renewed it at t = 4: the fleet heard of an observation, so robot_0 waits until t = 9.
-  ASSERT_TRUE(core.applyShared(shared("block", { face[0] }, Subsection(5.0, 4.5, 5.1, 5.5), 2, "robot_1"), 4.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", { face[0] }, Subsection(5.0, 4.5, 5.1, 5.5), 2, "robot_1"), 4.0).ok);
   EXPECT_TRUE(scanAt(core, world, 3.6, 5.0, 0.0, 6.0).empty());
   EXPECT_TRUE(scanAt(core, world, 3.6, 5.0, 0.0, 8.9).empty());
   const std::vector<ObstacleUpdate> renewal = scanAt(core, world, 3.6, 5.0, 0.0, 9.0);
@@ -100,7 +86,7 @@ TEST(Leases, AnotherRobotsObservationResetsTheInterval)
   EXPECT_EQ(3u, renewal[0].version);
   // An update that only clears is no observation: it does not reset the interval.
   ASSERT_TRUE(core.applyShared([&] {
-                ObstacleUpdate u = shared("block", {}, Subsection(5.0, 4.5, 5.1, 5.5), 4, "robot_1");
+                ObstacleUpdate u = sharedUpdate("block", {}, Subsection(5.0, 4.5, 5.1, 5.5), 4, "robot_1");
                 u.cleared = { 0 };
                 return u;
               }(),
@@ -145,13 +131,13 @@ TEST(MergedRectangles, AGrownRectangleIsMonitoredAndItsCellsAreNoLongerProposed)
   SharingCore core = makeCore();
   // The handler authorised only the south half of the face (another robot's partial view).
   const Subsection south(5.0, 4.5, 5.1, 4.95);
-  ASSERT_TRUE(core.applyShared(shared("block", { grid().getIndex(100, 91) }, south, 1, "robot_1"), 1.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", { grid().getIndex(100, 91) }, south, 1, "robot_1"), 1.0).ok);
   core.processScan(world.scan(3.6, 5.0, 0.0), 2.0);
   const std::vector<std::uint32_t> candidates = core.shareableCells();
   ASSERT_FALSE(candidates.empty()) << "the north half lies outside the rectangle: this robot's candidates";
 
   // A merge grew the rectangle over the whole face: monitoring takes the north half over.
-  ASSERT_TRUE(core.applyShared(shared("block", { grid().getIndex(100, 91) }, Subsection(5.0, 4.5, 5.1, 5.5), 2,
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", { grid().getIndex(100, 91) }, Subsection(5.0, 4.5, 5.1, 5.5), 2,
                                       "robot_1"),
                                3.0)
                   .ok);
@@ -166,7 +152,7 @@ TEST(MergedRectangles, AGrownRectangleIsMonitoredAndItsCellsAreNoLongerProposed)
         << "north cell " << index << " not added to the obstacle";
   }
   // A smaller rectangle in a later update never shrinks it.
-  ASSERT_TRUE(core.applyShared(shared("block", { grid().getIndex(100, 91) }, south, 9, "robot_2"), 4.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", { grid().getIndex(100, 91) }, south, 9, "robot_2"), 4.0).ok);
   EXPECT_EQ(5.5, core.sharedObstacles().at("block").rectangle.max_y);
 }
 
@@ -182,7 +168,7 @@ TEST(Growing, APartlySharedBlockGrowsOverItsWholeFaceAsTheRobotSeesIt)
   {
     middle.push_back(g.getIndex(100, y));
   }
-  ASSERT_TRUE(core.applyShared(shared("block", middle, Subsection(5.0, 4.9, 5.05, 5.1), 1, "robot_0"), 1.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", middle, Subsection(5.0, 4.9, 5.05, 5.1), 1, "robot_0"), 1.0).ok);
 
   std::vector<std::uint32_t> added;
   double t = 1.0;
@@ -227,7 +213,7 @@ TEST(Growing, NeitherWallsNorSeparateObjectsJoin)
   {
     face.push_back(g.getIndex(100, y));
   }
-  ASSERT_TRUE(core.applyShared(shared("block", face, Subsection(5.0, 4.5, 5.05, 5.5), 1, "robot_0"), 1.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", face, Subsection(5.0, 4.5, 5.05, 5.5), 1, "robot_0"), 1.0).ok);
   for (double t = 1.1; t < 4.0; t += 0.1)
   {
     scanAt(core, world, 3.6, 5.4, 0.0, t);

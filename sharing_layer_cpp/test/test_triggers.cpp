@@ -14,18 +14,6 @@ using namespace sharing_layer::test;
 
 namespace
 {
-/// Cells of a proposal list, all together, sorted.
-std::vector<std::uint32_t> allCells(const std::vector<Proposal>& proposals)
-{
-  std::vector<std::uint32_t> cells;
-  for (const Proposal& p : proposals)
-  {
-    cells.insert(cells.end(), p.cells.begin(), p.cells.end());
-  }
-  std::sort(cells.begin(), cells.end());
-  return cells;
-}
-
 /// Whether every cell lies in the world rectangle [x0, x1] x [y0, y1] (cell centres).
 bool allWithin(const std::vector<std::uint32_t>& cells, double x0, double y0, double x1, double y1)
 {
@@ -90,15 +78,7 @@ TEST(UnknownMap, CellsInOrNearUnknownMapAreasAreNeverShared)
   EXPECT_FALSE(allWithin(plain.shareableCells(), 5.4, 4.7, 5.8, 5.3));
 
   // Monitoring: a shared obstacle whose rectangle reaches into the unknown area gets no cells there.
-  ObstacleUpdate u;
-  u.uuid = "wide";
-  u.rectangle = Subsection(6.5, 3.0, 7.5, 7.0);
-  u.marked = { g.getIndex(131, 60) };
-  u.deadline = 60;
-  u.source = "robot_1";
-  u.geometry = g;
-  u.version = 1;
-  ASSERT_TRUE(core.applyShared(u, 2.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("wide", { g.getIndex(131, 60) }, Subsection(6.5, 3.0, 7.5, 7.0)), 2.0).ok);
   for (int i = 0; i < 3; ++i)
   {
     for (const ObstacleUpdate& update : core.processScan(world.scan(6.2, 5.0, 0.0), 2.1 + i).updates)
@@ -276,15 +256,9 @@ TEST(TriggerReasons, DebouncedStaticAndAlreadyShared)
   report = core.trigger(TriggerSource::StuckFeedback, 10.0, 2.0, 5.0);
   ASSERT_EQ(TriggerReason::Proposed, report.reason) << report.message;
   ASSERT_EQ(1u, report.proposals.size());
-  ObstacleUpdate u;
-  u.uuid = "block";
-  u.marked = report.proposals[0].cells;
-  u.rectangle = report.proposals[0].rectangle;
-  u.deadline = 60;
-  u.source = "robot_0";
-  u.geometry = grid();
-  u.version = 1;
-  ASSERT_TRUE(core.applyShared(u, 10.0).ok);
+  ASSERT_TRUE(core.applyShared(
+                      sharedUpdate("block", report.proposals[0].cells, report.proposals[0].rectangle, 1, "robot_0"), 10.0)
+                  .ok);
   core.processScan(world.scan(2.0, 5.0, 0.0), 20.0);
   report = core.trigger(TriggerSource::StuckFeedback, 20.0, 2.0, 5.0);
   EXPECT_EQ(TriggerReason::AlreadyShared, report.reason) << report.message;
@@ -395,15 +369,8 @@ TEST(PlanTrigger, AlreadySharedCellsOnThePlanAreReportedNotProposed)
   SimWorld world = walledWorld();
   world.box(5.02, 4.6, 5.32, 5.4);
   SharingCore core = makeCore();
-  ObstacleUpdate u;
-  u.uuid = "known";
-  u.rectangle = Subsection(4.9, 4.5, 5.5, 5.5);
-  u.marked = { grid().getIndex(100, 100) };
-  u.deadline = 60;
-  u.source = "robot_1";
-  u.geometry = grid();
-  u.version = 1;
-  ASSERT_TRUE(core.applyShared(u, 0.5).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("known", { grid().getIndex(100, 100) }, Subsection(4.9, 4.5, 5.5, 5.5)), 0.5)
+                  .ok);
   core.setPlan(line(1.0, 5.0, 9.0, 5.0));
   core.processScan(world.scan(3.5, 5.0, 0.0), 1.0);
   const TriggerReport report = core.checkPlan(3.5, 5.0, 1.0);
