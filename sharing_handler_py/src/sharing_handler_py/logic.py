@@ -542,9 +542,14 @@ class SharingHandler:
         merge_distance of it, or None."""
         for uuid in sorted(self._entries):
             entry = self._entries[uuid]
-            if entry.rectangle.overlaps(rectangle) or entry.rectangle.gap(rectangle) <= self._merge_distance:
+            if self._mergeable(entry.rectangle, rectangle):
                 return entry
         return None
+
+    def _mergeable(self, a, b):
+        """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the
+        gap between overlapping ones is 0."""
+        return a.gap(b) <= self._merge_distance
 
     def _merge_proposal(self, proposal, entry):
         """A proposal near a live obstacle is an observation of it: an update (marked cells, the
@@ -580,9 +585,8 @@ class SharingHandler:
         nothing near is left (an absorbed rectangle can reach a third obstacle)."""
         while True:
             entry = self._entries[uuid]
-            near = sorted(u for u, other in self._entries.items() if u != uuid and (
-                other.rectangle.overlaps(entry.rectangle)
-                or other.rectangle.gap(entry.rectangle) <= self._merge_distance))
+            near = sorted(u for u, other in self._entries.items()
+                          if u != uuid and self._mergeable(other.rectangle, entry.rectangle))
             if not near:
                 return uuid
             group = sorted(near + [uuid])
