@@ -47,13 +47,11 @@ bool usable(const Point3& p, const ScanLimits& limits, ScanTouch& touch)
   return true;
 }
 
-/// Costs the grid never holds (it holds FREE_SPACE, LETHAL_OBSTACLE and NO_INFORMATION), used as flags on
-/// watched cells during one scan: not touched by a beam yet, seen free with the endpoint well beyond,
-/// cleared by a beam ending close behind.
-constexpr std::uint8_t kTracked = 1;
-constexpr std::uint8_t kFreeDeep = 2;
-constexpr std::uint8_t kFreeShallow = 3;
-constexpr std::uint8_t kHitBit = 4;  ///< added to a flag when an endpoint of this scan lies in the cell
+/// Per-cell scratch flags of one scan (ScanWatch::scratch).
+constexpr std::uint8_t kWatched = 1;
+constexpr std::uint8_t kVisitedDeep = 2;     ///< a beam passed with its endpoint at least free_margin beyond
+constexpr std::uint8_t kVisitedShallow = 4;  ///< a beam passed with its endpoint closer
+constexpr std::uint8_t kHit = 8;             ///< an endpoint of this scan lies in the cell
 
 /// A monotonic stand-in for atan2(y, x) in [0, 4) (the "diamond angle"): one division instead of atan2.
 inline double pseudoAngle(double x, double y)
@@ -65,62 +63,67 @@ inline double pseudoAngle(double x, double y)
   return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
 }
 
-/// Directions (pseudo-angle intervals, seen from the origin cell) in which beams can cross a watched cell, with
-/// the band of distances (in cells) where those cells lie.
-class WatchedDirections
+/// The scan's beams as raytraced (endpoint cells after clipping), bucketed by direction from the origin cell so
+/// that the beams able to cross a watched region are found without testing every beam against it.
+class BeamIndex
 {
 public:
-  struct Interval
+  struct Beam
   {
-    double lo, hi;      ///< pseudo-angles
-    double near, far;   ///< distances from the origin cell's centre, cells
+    LineSteps line;
+    std::size_t point;                ///< index in the observation
+    unsigned int deep_steps = kUnset;  ///< steps before which a watched cell counts as seen free (lazily)
   };
+  static constexpr unsigned int kUnset = UINT_MAX;
+  static constexpr int kBuckets = 2048;  ///< about 0.18 degrees each
 
-  WatchedDirections(const GridGeometry& g, const ScanWatch& watch, unsigned int x0, unsigned int y0)
+  explicit BeamIndex(std::size_t capacity)
   {
-    if (watch.cells.empty())
+    beams_.reserve(capacity);
+    bucket_of_.reserve(capacity);
+  }
+
+  void add(const LineSteps& line, std::size_t point, int dx, int dy)
+  {
+    beams_.push_back(Beam{ line, point });
+    bucket_of_.push_back(static_cast<std::uint16_t>(bucketOf(pseudoAngle(dx, dy))));
+  }
+
+  /// Counting sort by bucket; call once after the last add.
+  void build()
+  {
+    start_.assign(kBuckets + 1, 0);
+    for (std::uint16_t b : bucket_of_)
     {
-      return;
+      ++start_[b + 1];
     }
-    if (!watch.regions.empty())
+    for (int b = 0; b < kBuckets; ++b)
     {
-      for (const CellRect& r : watch.regions)
-      {
-        add(r.min_x, r.min_y, r.max_x, r.max_y, x0, y0);
-      }
+      start_[b + 1] += start_[b];
     }
-    else
+    // Placed from the back of each bucket: start_[b + 1] counts down to start_[b].
+    order_.resize(beams_.size());
+    std::vector<std::uint32_t> next(start_.begin() + 1, start_.end());
+    for (std::size_t i = beams_.size(); i-- > 0;)
     {
-      for (std::uint32_t index : watch.cells)
-      {
-        unsigned int cx = 0, cy = 0;
-        g.indexToCells(index, cx, cy);
-        add(static_cast<int>(cx), static_cast<int>(cy), static_cast<int>(cx), static_cast<int>(cy), x0, y0);
-      }
+      order_[--next[bucket_of_[i]]] = static_cast<std::uint32_t>(i);
     }
   }
 
-  /// @brief Adds the directions and distances of the cells [min_x, max_x] x [min_y, max_y].
-  void add(int min_x, int min_y, int max_x, int max_y, unsigned int x0, unsigned int y0)
+  /// Calls f(beam) for every beam whose direction can cross a cell of [min_x, max_x] x [min_y, max_y]: its
+  /// pseudo-angle lies within that of the rectangle's corners grown by the slack of a Bresenham line.
+  template <class F>
+  void forEachTowards(int min_x, int min_y, int max_x, int max_y, unsigned int x0, unsigned int y0, F f)
   {
-    if (max_x < min_x || max_y < min_y)
-    {
-      return;
-    }
-    // A Bresenham line strays up to half a cell from the exact line between cell centres: grow by that and a
-    // margin, on top of the half cell from a centre to the cell's edge.
-    constexpr double kGrow = 0.5 + 0.6;
+    // A beam visits a cell only where the exact line between the start and end cells' centres passes within
+    // half a cell of the cell's centre along b (Bresenham rounds b to the nearest cell), so only through the
+    // cell's own square: its corners bound the directions, with a margin for rounding.
+    constexpr double kGrow = 0.5 + 0.05;
     const double x_lo = min_x - static_cast<double>(x0) - kGrow, x_hi = max_x - static_cast<double>(x0) + kGrow;
     const double y_lo = min_y - static_cast<double>(y0) - kGrow, y_hi = max_y - static_cast<double>(y0) + kGrow;
-    // Distances of the cell centres from the origin cell's centre, with room for the line's rounding.
-    const double nx = std::max(0.0, std::max(x_lo + kGrow, -(x_hi - kGrow)));
-    const double ny = std::max(0.0, std::max(y_lo + kGrow, -(y_hi - kGrow)));
-    const double fx = std::max(std::fabs(x_lo + kGrow), std::fabs(x_hi - kGrow));
-    const double fy = std::max(std::fabs(y_lo + kGrow), std::fabs(y_hi - kGrow));
-    const double near = std::sqrt(nx * nx + ny * ny) - 2.0, far = std::sqrt(fx * fx + fy * fy) + 2.0;
     if (x_lo <= 0.5 && x_hi >= -0.5 && y_lo <= 0.5 && y_hi >= -0.5)
     {
-      push(Interval{ 0.0, 4.0, near, far });  // around the origin: every direction
+      visit(0, kBuckets - 1, f);  // around the origin: every direction
       return;
     }
     const double corners[4][2] = { { x_lo, y_lo }, { x_hi, y_lo }, { x_lo, y_hi }, { x_hi, y_hi } };
@@ -137,75 +140,35 @@ public:
       double below = 0.0, above = 4.0;
       for (double v : a)
       {
-        if (v < 2.0)
-        {
-          below = std::max(below, v);
-        }
-        else
-        {
-          above = std::min(above, v);
-        }
+        (v < 2.0 ? below : above) = v < 2.0 ? std::max(below, v) : std::min(above, v);
       }
-      push(Interval{ 0.0, below, near, far });
-      push(Interval{ above, 4.0, near, far });
+      visit(0, bucketOf(below), f);
+      visit(bucketOf(above), kBuckets - 1, f);
+      return;
     }
-    else
-    {
-      push(Interval{ lo, hi, near, far });
-    }
+    visit(bucketOf(lo), bucketOf(hi), f);
   }
 
-  /// @return whether a beam towards cell offset (dx, dy) from the origin cell can cross a watched cell, and if
-  /// so the band of distances (cells) where they lie
-  bool crosses(int dx, int dy, double& near, double& far) const
-  {
-    if (buckets_.empty())
-    {
-      return false;
-    }
-    const Band& b = buckets_[bucketOf(pseudoAngle(dx, dy))];
-    if (b.far < 0.0)
-    {
-      return false;
-    }
-    near = b.near;
-    far = b.far;
-    return true;
-  }
+  bool empty() const { return beams_.empty(); }
 
 private:
-  /// Pseudo-angle buckets (about 0.18 degrees each), each with the band of distances of the watched cells
-  /// whose directions overlap it; far < 0: none.
-  struct Band
-  {
-    double near, far;
-  };
-  static constexpr int kBuckets = 2048;
   static int bucketOf(double angle)
   {
     return std::min(kBuckets - 1, std::max(0, static_cast<int>(angle * (kBuckets / 4.0))));
   }
-  void push(const Interval& iv)
+  template <class F>
+  void visit(int first, int last, F& f)
   {
-    if (buckets_.empty())
+    for (std::uint32_t k = start_[first]; k < start_[last + 1]; ++k)
     {
-      buckets_.assign(kBuckets, Band{ 0.0, -1.0 });
-    }
-    for (int i = bucketOf(iv.lo), end = bucketOf(iv.hi); i <= end; ++i)
-    {
-      Band& b = buckets_[i];
-      if (b.far < 0.0)
-      {
-        b = Band{ iv.near, iv.far };
-      }
-      else
-      {
-        b.near = std::min(b.near, iv.near);
-        b.far = std::max(b.far, iv.far);
-      }
+      f(beams_[order_[k]]);
     }
   }
-  std::vector<Band> buckets_;
+
+  std::vector<Beam> beams_;
+  std::vector<std::uint16_t> bucket_of_;
+  std::vector<std::uint32_t> start_;  ///< per bucket: its first position in order_
+  std::vector<std::uint32_t> order_;  ///< beam indexes by bucket
 };
 
 void sortUnique(std::vector<std::uint32_t>& cells)
@@ -239,11 +202,15 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   std::uint8_t* costs = grid.data();
   ScanTouch touch;
   const std::size_t cell_count = g.cellCount();
-  for (std::uint32_t index : watch.cells)
+  for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
   {
-    if (index >= cell_count)
+    for (std::uint32_t index : *list)
     {
-      throw std::invalid_argument("applyScan: watched cell " + std::to_string(index) + " outside " + g.describe());
+      if (index >= cell_count)
+      {
+        throw std::invalid_argument("applyScan: watched cell " + std::to_string(index) + " outside " +
+                                    g.describe());
+      }
     }
   }
   if (watch.free_neighbours > 10000)
@@ -256,46 +223,42 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     throw std::invalid_argument("applyScan: free_margin must be finite and >= 0, got " +
                                 std::to_string(watch.free_margin));
   }
-  // Flag every watched cell (kTracked) and keep its cost. Beams then move flags through tables instead of
-  // writing FREE_SPACE: kFreeDeep where the beam ends at least free_margin beyond the cell, kFreeShallow
-  // where it ends closer. Marking overwrites a flag with LETHAL_OBSTACLE; the flags are read back after.
-  std::vector<std::uint8_t> watched_before(watch.cells.size());
-  for (std::size_t i = 0; i < watch.cells.size(); ++i)
+  if (watch.scratch != nullptr && watch.scratch_size != cell_count)
   {
-    std::uint8_t& cost = costs[watch.cells[i]];
-    watched_before[i] = cost;
-    cost = kTracked;
+    throw std::invalid_argument("applyScan: scratch holds " + std::to_string(watch.scratch_size) +
+                                " cells, the grid " + std::to_string(cell_count));
   }
-  std::uint8_t deep_table[256];
-  std::uint8_t shallow_table[256];
-  for (int v = 0; v < 256; ++v)
+  const bool watching = !watch.empty();
+  std::vector<std::uint8_t> own_scratch;
+  std::uint8_t* flags = watch.scratch;
+  if (watching && flags == nullptr)
   {
-    const bool flagged = v == kTracked || v == kFreeDeep || v == kFreeShallow;
-    deep_table[v] = flagged ? kFreeDeep : FREE_SPACE;
-    shallow_table[v] = flagged ? (v == kFreeDeep ? kFreeDeep : kFreeShallow) : FREE_SPACE;
+    own_scratch.assign(cell_count, 0);
+    flags = own_scratch.data();
+  }
+  for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
+  {
+    for (std::uint32_t index : *list)
+    {
+      flags[index] = kWatched;
+    }
   }
 
+  // Clearing, exactly as without a watch; the beams that reach a watched cell are walked again below.
   const double ox = observation.origin.x;
   const double oy = observation.origin.y;
   unsigned int x0 = 0, y0 = 0;
   touch.origin_in_map = std::isfinite(observation.origin.z) && g.worldToMap(ox, oy, x0, y0);
-
+  BeamIndex beams(watching ? observation.points.size() : 0);
   if (touch.origin_in_map)
   {
     const double map_end_x = g.endX();
     const double map_end_y = g.endY();
     const unsigned int cell_raytrace_range = g.cellDistance(limits.raytrace_range);
     SetCellAction clear{ costs, FREE_SPACE };
-    TableAction clear_deep{ costs, deep_table };
-    TableAction clear_shallow{ costs, shallow_table };
-    const bool watching = !watch.cells.empty();
-    const WatchedDirections directions(g, watch, x0, y0);
-    std::size_t point_index = 0;
-
     for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
     {
       const Point3& p = observation.points[pi];
-      point_index = pi;
       if (!usable(p, limits, touch))
       {
         continue;
@@ -334,37 +297,15 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       {
         continue;
       }
-
-      double watch_from = 0.0, watch_until = 0.0;
-      if (!watching || !directions.crosses(static_cast<int>(x1) - static_cast<int>(x0),
-                                           static_cast<int>(y1) - static_cast<int>(y0), watch_from, watch_until))
+      const LineSteps line = lineSteps(x0, y0, x1, y1, cell_raytrace_range);
+      const int row = static_cast<int>(g.size_x);
+      bresenham2D(clear, line.abs_da, line.abs_db, static_cast<int>(line.abs_da / 2),
+                  line.x_major ? line.sign_a : line.sign_a * row, line.x_major ? line.sign_b * row : line.sign_b,
+                  y0 * g.size_x + x0, line.end);
+      if (watching)
       {
-        raytraceLine(clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range);
-        continue;
+        beams.add(line, pi, static_cast<int>(x1) - static_cast<int>(x0), static_cast<int>(y1) - static_cast<int>(y0));
       }
-      // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam
-      // (the face it hit, a neighbour it grazed) only clears.
-      // Shadow filter: the shortest range among this point and its free_neighbours neighbours on each side
-      // (computed only for the few beams that can cross a watched cell).
-      double shadow_sq = a * a + b * b;
-      {
-        const std::size_t n = observation.points.size();
-        const std::size_t k = watch.free_neighbours;
-        const std::size_t lo = point_index >= k ? point_index - k : 0;
-        const std::size_t hi = std::min(n - 1, point_index + k);
-        for (std::size_t j = lo; j <= hi; ++j)
-        {
-          const Point3& q = observation.points[j];
-          const double r_sq = (q.x - ox) * (q.x - ox) + (q.y - oy) * (q.y - oy);
-          if (std::isfinite(r_sq))
-          {
-            shadow_sq = std::min(shadow_sq, r_sq);
-          }
-        }
-      }
-      const double deep_until = (std::sqrt(shadow_sq) - watch.free_margin) / g.resolution;
-      raytraceLineSplit(clear_deep, clear_shallow, clear, x0, y0, x1, y1, g.size_x, cell_raytrace_range, watch_from,
-                        deep_until, watch_until);
     }
   }
 
@@ -373,7 +314,6 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   // the beams that graze it).
   const double sq_obstacle_range = limits.obstacle_range * limits.obstacle_range;
   const double oz = observation.origin.z;
-  const bool watching = !watch.cells.empty();
   // Endpoints farther than the farthest watched cell (plus a cell) cannot lie in one.
   double sq_hit_range = -1.0;
   const auto farther = [&](unsigned int cx, unsigned int cy) {
@@ -397,9 +337,13 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       }
     }
   }
-  else
+  for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
   {
-    for (std::uint32_t index : watch.cells)
+    if (list == &watch.cells && !watch.regions.empty())
+    {
+      continue;  // the regions' corners bound them
+    }
+    for (std::uint32_t index : *list)
     {
       unsigned int cx = 0, cy = 0;
       g.indexToCells(index, cx, cy);
@@ -431,9 +375,9 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       continue;
     }
     const std::uint32_t index = g.getIndex(mx, my);
-    if (watching && costs[index] >= kTracked && costs[index] <= kFreeShallow)
+    if (watching && (flags[index] & kWatched) && !(flags[index] & kHit))
     {
-      costs[index] = static_cast<std::uint8_t>(costs[index] | kHitBit);
+      flags[index] |= kHit;
       touch.watched_hit.push_back(index);
     }
     if (in_range)
@@ -442,6 +386,125 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       touch.marked.push_back(index);
     }
   }
+  // Which watched cells the beams passed, and how far before their endpoints. Only the beams pointing at a
+  // region are walked, and only over the steps inside it: the cost grows with the watched area in view, not
+  // with the length of the beams. After marking, so that loose cells marked again (not seen free whatever the
+  // beams did) are not walked at all.
+  if (watching && !beams.empty())
+  {
+    const auto shadow_deep_steps = [&](BeamIndex::Beam& beam) {
+      // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam (the face
+      // it hit, a neighbour it grazed) only clears. Shadow filter: the shortest range among this point and its
+      // free_neighbours neighbours on each side.
+      const Point3& p = observation.points[beam.point];
+      double shadow_sq = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy);
+      const std::size_t n = observation.points.size();
+      const std::size_t k = watch.free_neighbours;
+      const std::size_t lo = beam.point >= k ? beam.point - k : 0;
+      const std::size_t hi = std::min(n - 1, beam.point + k);
+      for (std::size_t j = lo; j <= hi; ++j)
+      {
+        const Point3& q = observation.points[j];
+        const double r_sq = (q.x - ox) * (q.x - ox) + (q.y - oy) * (q.y - oy);
+        if (std::isfinite(r_sq))
+        {
+          shadow_sq = std::min(shadow_sq, r_sq);
+        }
+      }
+      const double deep_until = (std::sqrt(shadow_sq) - watch.free_margin) / g.resolution;
+      return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist);
+    };
+    bool built = false;
+    const auto walk_region = [&](const CellRect& r) {
+      if (!built)
+      {
+        beams.build();
+        built = true;
+      }
+      beams.forEachTowards(r.min_x, r.min_y, r.max_x, r.max_y, x0, y0, [&](BeamIndex::Beam& beam) {
+        const LineSteps& line = beam.line;
+        const int a0 = static_cast<int>(line.x_major ? x0 : y0);
+        const int b0 = static_cast<int>(line.x_major ? y0 : x0);
+        const int a_min = line.x_major ? r.min_x : r.min_y, a_max = line.x_major ? r.max_x : r.max_y;
+        const int b_min = line.x_major ? r.min_y : r.min_x, b_max = line.x_major ? r.max_y : r.max_x;
+        // The steps whose a coordinate lies in the region.
+        long first = 0, last = 0;
+        if (line.sign_a > 0)
+        {
+          first = a_min - a0;
+          last = a_max - a0;
+        }
+        else if (line.sign_a < 0)
+        {
+          first = a0 - a_max;
+          last = a0 - a_min;
+        }
+        else if (a0 < a_min || a0 > a_max)
+        {
+          return;
+        }
+        first = std::max(first, 0L);
+        last = std::min(last, static_cast<long>(line.end));
+        if (first > last)
+        {
+          return;
+        }
+        unsigned int carries = 0;
+        std::uint64_t error = line.abs_da / 2;
+        if (first > 0)
+        {
+          carries = line.carries(static_cast<unsigned int>(first));
+          error += static_cast<std::uint64_t>(first) * line.abs_db - static_cast<std::uint64_t>(carries) * line.abs_da;
+        }
+        for (long i = first; i <= last; ++i)
+        {
+          const int b = b0 + line.sign_b * static_cast<int>(carries);
+          if (b >= b_min && b <= b_max)
+          {
+            const int a = a0 + line.sign_a * static_cast<int>(i);
+            const std::uint32_t index = line.x_major ? g.getIndex(a, b) : g.getIndex(b, a);
+            if (flags[index] & kWatched)
+            {
+              if (beam.deep_steps == BeamIndex::kUnset)
+              {
+                beam.deep_steps = shadow_deep_steps(beam);
+              }
+              flags[index] |= static_cast<unsigned int>(i) < beam.deep_steps ? kVisitedDeep : kVisitedShallow;
+            }
+          }
+          error += line.abs_db;
+          if (error >= line.abs_da)
+          {
+            error -= line.abs_da;
+            ++carries;
+          }
+        }
+      });
+    };
+    for (const CellRect& r : watch.regions)
+    {
+      if (!r.empty())
+      {
+        walk_region(r);
+      }
+    }
+    // Cells covered by no region are walked one by one.
+    const auto walk_cell = [&](std::uint32_t index) {
+      if ((flags[index] & (kVisitedDeep | kVisitedShallow)) || costs[index] == LETHAL_OBSTACLE)
+      {
+        return;  // a duplicate walked already, or marked by this scan
+      }
+      unsigned int cx = 0, cy = 0;
+      g.indexToCells(index, cx, cy);
+      walk_region(CellRect{ static_cast<int>(cx), static_cast<int>(cy), static_cast<int>(cx), static_cast<int>(cy) });
+    };
+    if (watch.regions.empty())
+    {
+      std::for_each(watch.cells.begin(), watch.cells.end(), walk_cell);
+    }
+    std::for_each(watch.loose_cells.begin(), watch.loose_cells.end(), walk_cell);
+  }
+
   if (!touch.origin_in_map)
   {
     for (const Point3& p : observation.points)
@@ -451,42 +514,23 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   }
   sortUnique(touch.marked);
 
-  // Read the flags back: kFreeDeep / kFreeShallow mean cleared by this scan and not marked again (a cell
-  // marked again is lethal and was not seen free, as costmap_2d keeps it), and the grid gets FREE_SPACE as
-  // without a watch; kTracked means untouched, and the cost is restored. Restored in reverse so a
-  // duplicate's saved flag is overwritten by the first occurrence's true cost.
-  for (std::uint32_t index : watch.cells)
+  // Read the flags back and leave the scratch zeroed. A visited cell that is lethal now was marked again by this
+  // scan: not seen free, as costmap_2d keeps it.
+  for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
   {
-    const std::uint8_t v = costs[index];
-    if (v > (kFreeShallow | kHitBit))
+    for (std::uint32_t index : *list)
     {
-      continue;  // marked (LETHAL_OBSTACLE) by this scan
-    }
-    const std::uint8_t state = static_cast<std::uint8_t>(v & ~kHitBit);
-    if (state == kFreeDeep || state == kFreeShallow)
-    {
+      const std::uint8_t f = flags[index];
+      flags[index] = 0;
+      if (!(f & (kVisitedDeep | kVisitedShallow)) || costs[index] == LETHAL_OBSTACLE)
+      {
+        continue;  // untouched, marked again, or a duplicate already read
+      }
       touch.watched_cleared.push_back(index);
-      if (state == kFreeDeep && !(v & kHitBit))
+      if ((f & kVisitedDeep) && !(f & kHit))
       {
         touch.watched_free.push_back(index);
       }
-    }
-  }
-  for (std::size_t i = watch.cells.size(); i-- > 0;)
-  {
-    std::uint8_t& cost = costs[watch.cells[i]];
-    if (cost > (kFreeShallow | kHitBit))
-    {
-      continue;
-    }
-    const std::uint8_t state = static_cast<std::uint8_t>(cost & ~kHitBit);
-    if (state == kTracked)
-    {
-      cost = watched_before[i];
-    }
-    else if (state == kFreeDeep || state == kFreeShallow)
-    {
-      cost = FREE_SPACE;
     }
   }
   sortUnique(touch.watched_hit);

@@ -145,7 +145,7 @@ SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params
                         FREE_SPACE);
   is_shareable_.assign(geometry.cellCount(), 0);
   monitored_.assign(geometry.cellCount(), 0);
-  steady_flag_.assign(geometry.cellCount(), 0);
+  cell_flags_.assign(geometry.cellCount(), 0);
 }
 
 void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count)
@@ -234,6 +234,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   ScanWatch watch;
   watch.free_margin = params_.clearing_margin;
   watch.free_neighbours = params_.clearing_neighbours;
+  watch.scratch = cell_flags_.data();
+  watch.scratch_size = cell_flags_.size();
   if (origin_finite)
   {
     for (auto& entry : shared_)
@@ -282,9 +284,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         g.mapToWorld(mx, my, wx, wy);
         if ((wx - ox) * (wx - ox) + (wy - oy) * (wy - oy) <= reach_sq)
         {
-          watch.cells.push_back(it->first);
-          watch.regions.push_back(CellRect{ static_cast<int>(mx), static_cast<int>(my), static_cast<int>(mx),
-                                            static_cast<int>(my) });
+          // Scattered cells, mostly marked again by this very scan: walked one by one, and only if not.
+          watch.loose_cells.push_back(it->first);
         }
       }
       ++it;
@@ -461,7 +462,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   }
   for (std::uint32_t index : steady_all)
   {
-    steady_flag_[index] = 0;
+    cell_flags_[index] = 0;
   }
   return outcome;
 }
@@ -1081,7 +1082,7 @@ std::vector<std::uint32_t> SharingCore::steadyShareable()
         found->second.time - found->second.marked_since >= params_.clearing_time)
     {
       steady.push_back(index);
-      steady_flag_[index] = 1;
+      cell_flags_[index] = 1;
     }
   }
   return steady;
@@ -1094,7 +1095,7 @@ bool SharingCore::steadyInRing(const CellRect& r, int gap) const
   const int y0 = std::max(0, r.min_y - gap), y1 = std::min(static_cast<int>(g.size_y) - 1, r.max_y + gap);
   for (int y = y0; y <= y1; ++y)
   {
-    const std::uint8_t* row = steady_flag_.data() + static_cast<std::size_t>(y) * g.size_x;
+    const std::uint8_t* row = cell_flags_.data() + static_cast<std::size_t>(y) * g.size_x;
     auto any = [&](int from, int to) { return std::any_of(row + from, row + to + 1, [](std::uint8_t f) { return f != 0; }); };
     if (y < r.min_y || y > r.max_y ? any(x0, x1)
                                    : (x0 <= r.min_x - 1 && any(x0, r.min_x - 1)) || (r.max_x + 1 <= x1 && any(r.max_x + 1, x1)))

@@ -42,6 +42,48 @@ inline void bresenham2D(Action& at, unsigned int abs_da, unsigned int abs_db, in
 }
 
 /**
+ * @brief The Bresenham line of raytraceLine from (x0, y0) to (x1, y1) as steps along its dominant axis "a"
+ * (x when |dx| >= |dy|): step i visits a0 + sign_a * i and b0 + sign_b * carries(i), for i = 0 .. end.
+ */
+struct LineSteps
+{
+  bool x_major;
+  unsigned int abs_da, abs_db;
+  int sign_a, sign_b;
+  unsigned int end;  ///< the last step visited: abs_da, or fewer when max_length cuts the line
+  double dist;       ///< cells from the start cell's centre to the end cell's centre
+
+  /// @return how many times the line has moved along b after i steps (bresenham2D's error term, closed form)
+  unsigned int carries(unsigned int i) const
+  {
+    return abs_da == 0 ? 0u
+                       : static_cast<unsigned int>((static_cast<std::uint64_t>(abs_da / 2) +
+                                                    static_cast<std::uint64_t>(i) * abs_db) /
+                                                   abs_da);
+  }
+};
+
+inline LineSteps lineSteps(unsigned int x0, unsigned int y0, unsigned int x1, unsigned int y1,
+                           unsigned int max_length = UINT_MAX)
+{
+  const int dx = static_cast<int>(x1) - static_cast<int>(x0);
+  const int dy = static_cast<int>(y1) - static_cast<int>(y0);
+  const unsigned int abs_dx = static_cast<unsigned int>(std::abs(dx));
+  const unsigned int abs_dy = static_cast<unsigned int>(std::abs(dy));
+  LineSteps line;
+  line.x_major = abs_dx >= abs_dy;
+  line.abs_da = line.x_major ? abs_dx : abs_dy;
+  line.abs_db = line.x_major ? abs_dy : abs_dx;
+  line.sign_a = signOf(line.x_major ? dx : dy);
+  line.sign_b = signOf(line.x_major ? dy : dx);
+  // sqrt of the sum of squares rather than hypot: exact for these integer offsets, at a fraction of the cost
+  line.dist = std::sqrt(static_cast<double>(dx) * dx + static_cast<double>(dy) * dy);
+  const double scale = (line.dist == 0.0) ? 1.0 : std::min(1.0, max_length / line.dist);
+  line.end = std::min(static_cast<unsigned int>(scale * line.abs_da), line.abs_da);
+  return line;
+}
+
+/**
  * @brief Applies an action to every cell on the line from (x0, y0) to (x1, y1), as
  * costmap_2d's Costmap2D::raytraceLine: the line is cut to max_length cells
  * (Euclidean, measured in cells) and the cells are visited from the start outwards.
@@ -51,82 +93,12 @@ template <class Action>
 inline void raytraceLine(Action& at, unsigned int x0, unsigned int y0, unsigned int x1, unsigned int y1,
                          unsigned int size_x, unsigned int max_length = UINT_MAX)
 {
-  const int dx = static_cast<int>(x1) - static_cast<int>(x0);
-  const int dy = static_cast<int>(y1) - static_cast<int>(y0);
-  const unsigned int abs_dx = static_cast<unsigned int>(std::abs(dx));
-  const unsigned int abs_dy = static_cast<unsigned int>(std::abs(dy));
-  const int offset_dx = signOf(dx);
-  const int offset_dy = signOf(dy) * static_cast<int>(size_x);
-  const std::uint32_t offset = y0 * size_x + x0;
-
-  const double dist = std::hypot(static_cast<double>(dx), static_cast<double>(dy));
-  const double scale = (dist == 0.0) ? 1.0 : std::min(1.0, max_length / dist);
-
-  if (abs_dx >= abs_dy)
-  {
-    const int error_y = static_cast<int>(abs_dx / 2);
-    bresenham2D(at, abs_dx, abs_dy, error_y, offset_dx, offset_dy, offset,
-                static_cast<unsigned int>(scale * abs_dx));
-    return;
-  }
-  const int error_x = static_cast<int>(abs_dy / 2);
-  bresenham2D(at, abs_dy, abs_dx, error_x, offset_dy, offset_dx, offset, static_cast<unsigned int>(scale * abs_dy));
-}
-
-/**
- * @brief bresenham2D with three actions by step along the dominant axis: plain before start_steps, deep from
- * there before deep_steps, shallow from there before watch_steps, plain again after. The cells visited are
- * exactly those of bresenham2D.
- */
-template <class DeepAction, class ShallowAction, class PlainAction>
-inline void bresenham2DSplit(DeepAction& deep, ShallowAction& shallow, PlainAction& plain, unsigned int abs_da,
-                             unsigned int abs_db, int error_b, int offset_a, int offset_b, std::uint32_t offset,
-                             unsigned int max_length, unsigned int start_steps, unsigned int deep_steps,
-                             unsigned int watch_steps)
-{
-  const unsigned int end = std::min(max_length, abs_da);
-  const unsigned int s0 = std::min(end, start_steps);
-  const unsigned int s1 = std::min(end, std::max(s0, deep_steps));
-  const unsigned int s2 = std::min(end, std::max(s1, watch_steps));
-  unsigned int i = 0;
-#define SHARING_LAYER_BRESENHAM_STEP(action)                                                                          \
-  action(offset);                                                                                                    \
-  offset += offset_a;                                                                                                \
-  error_b += abs_db;                                                                                                 \
-  if (static_cast<unsigned int>(error_b) >= abs_da)                                                                  \
-  {                                                                                                                  \
-    offset += offset_b;                                                                                              \
-    error_b -= abs_da;                                                                                               \
-  }
-  for (; i < s0; ++i)
-  {
-    SHARING_LAYER_BRESENHAM_STEP(plain)
-  }
-  for (; i < s1; ++i)
-  {
-    SHARING_LAYER_BRESENHAM_STEP(deep)
-  }
-  for (; i < s2; ++i)
-  {
-    SHARING_LAYER_BRESENHAM_STEP(shallow)
-  }
-  for (; i < end; ++i)
-  {
-    SHARING_LAYER_BRESENHAM_STEP(plain)
-  }
-#undef SHARING_LAYER_BRESENHAM_STEP
-  if (end < start_steps || end >= watch_steps)
-  {
-    plain(offset);
-  }
-  else if (end < deep_steps)
-  {
-    deep(offset);
-  }
-  else
-  {
-    shallow(offset);
-  }
+  const LineSteps line = lineSteps(x0, y0, x1, y1, max_length);
+  const int row = static_cast<int>(size_x);
+  const int offset_a = line.x_major ? line.sign_a : line.sign_a * row;
+  const int offset_b = line.x_major ? line.sign_b * row : line.sign_b;
+  bresenham2D(at, line.abs_da, line.abs_db, static_cast<int>(line.abs_da / 2), offset_a, offset_b,
+              y0 * size_x + x0, line.end);
 }
 
 /// @return how many steps along the dominant axis lie within distance (cells) of the start: the steps i with
@@ -141,53 +113,6 @@ inline unsigned int stepsWithin(double distance, unsigned int abs_da, double dis
   const double steps = dist == 0.0 ? 1.0 : std::floor(distance * abs_da / dist + 1e-9) + 1.0;
   return steps >= static_cast<double>(UINT_MAX) ? UINT_MAX : static_cast<unsigned int>(steps);
 }
-
-/**
- * @brief raytraceLine with three actions by distance from the start cell's centre (in cells): plain before
- * watch_from, deep up to deep_until, shallow up to watch_until, plain beyond. Visits the same cells as
- * raytraceLine. Only cells between watch_from and watch_until may hold flags the deep and shallow actions
- * read; a negative deep_until makes no cell deep.
- */
-template <class DeepAction, class ShallowAction, class PlainAction>
-inline void raytraceLineSplit(DeepAction& deep, ShallowAction& shallow, PlainAction& plain, unsigned int x0,
-                              unsigned int y0, unsigned int x1, unsigned int y1, unsigned int size_x,
-                              unsigned int max_length, double watch_from, double deep_until, double watch_until)
-{
-  const int dx = static_cast<int>(x1) - static_cast<int>(x0);
-  const int dy = static_cast<int>(y1) - static_cast<int>(y0);
-  const unsigned int abs_dx = static_cast<unsigned int>(std::abs(dx));
-  const unsigned int abs_dy = static_cast<unsigned int>(std::abs(dy));
-  const int offset_dx = signOf(dx);
-  const int offset_dy = signOf(dy) * static_cast<int>(size_x);
-  const std::uint32_t offset = y0 * size_x + x0;
-
-  const double dist = std::sqrt(static_cast<double>(dx) * dx + static_cast<double>(dy) * dy);
-  const double scale = (dist == 0.0) ? 1.0 : std::min(1.0, max_length / dist);
-  const unsigned int abs_da = std::max(abs_dx, abs_dy);
-  // Steps strictly before watch_from are plain: stepsWithin of a hair less.
-  const unsigned int start_steps = watch_from <= 0.0 ? 0 : stepsWithin(watch_from - 1e-6, abs_da, dist);
-  const unsigned int watch_steps = stepsWithin(watch_until, abs_da, dist);
-  const unsigned int deep_steps = std::min(watch_steps, stepsWithin(deep_until, abs_da, dist));
-
-  if (abs_dx >= abs_dy)
-  {
-    const int error_y = static_cast<int>(abs_dx / 2);
-    bresenham2DSplit(deep, shallow, plain, abs_dx, abs_dy, error_y, offset_dx, offset_dy, offset,
-                     static_cast<unsigned int>(scale * abs_dx), start_steps, deep_steps, watch_steps);
-    return;
-  }
-  const int error_x = static_cast<int>(abs_dy / 2);
-  bresenham2DSplit(deep, shallow, plain, abs_dy, abs_dx, error_x, offset_dy, offset_dx, offset,
-                   static_cast<unsigned int>(scale * abs_dy), start_steps, deep_steps, watch_steps);
-}
-
-/// @brief Action that replaces every visited cell's value through a 256-entry table.
-struct TableAction
-{
-  std::uint8_t* costs;
-  const std::uint8_t* table;
-  inline void operator()(std::uint32_t offset) { costs[offset] = table[costs[offset]]; }
-};
 
 /// @brief Action that writes one value into every visited cell (costmap_2d's MarkCell).
 struct SetCellAction

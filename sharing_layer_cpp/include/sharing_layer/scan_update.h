@@ -12,8 +12,9 @@ namespace sharing_layer
  * @brief Which cells a scan should report when it clears them: the present cells of the monitored
  * obstacles, since only a present cell can be cleared from an obstacle.
  *
- * The scan flags them in the grid before raytracing and reads them back afterwards, so monitoring
- * costs two passes over the watched cells and nothing per beam or per cell walked.
+ * Raytracing is left exactly as without a watch. The scan flags the watched cells in a scratch array, and
+ * walks again only the beams pointing at a region, over the steps inside it: monitoring costs a pass over the
+ * watched cells and a walk over the watched area in view, nothing per cell outside it.
  */
 struct ScanWatch
 {
@@ -29,11 +30,18 @@ struct ScanWatch
   /// Optional: rectangles that together cover every watched cell (e.g. the obstacles' rectangles). Beams
   /// are tested against these instead of against each cell, which is cheaper when they hold many cells.
   std::vector<CellRect> regions;
+  /// Watched as cells, but covered by no region (scattered cells): walked one by one, and only when this scan
+  /// did not mark them again.
+  std::vector<std::uint32_t> loose_cells;
+  /// Optional: a per-cell scratch array of the grid's size, all zero, which the scan leaves all zero. Without
+  /// it a watching scan allocates one per call (as large as the grid).
+  std::uint8_t* scratch = nullptr;
+  std::size_t scratch_size = 0;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);
 
-  bool empty() const { return cells.empty(); }
+  bool empty() const { return cells.empty() && loose_cells.empty(); }
 };
 
 /**

@@ -288,7 +288,7 @@ private:
   /// never come (navfn's detour no longer runs into it).
   void growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& steady, std::vector<std::uint32_t>& marked);
   /// @brief Shareable cells marked steadily (the candidates of growInto; those it takes leave the list); also
-  /// flags them in steady_flag_, which processScan resets.
+  /// flags them in cell_flags_, which processScan resets.
   std::vector<std::uint32_t> steadyShareable();
   /// @return whether a flagged steady cell lies within gap cells around the rectangle, outside it
   bool steadyInRing(const CellRect& rect, int gap) const;
@@ -313,7 +313,9 @@ private:
   std::vector<std::uint32_t> shareable_;
   std::vector<std::uint8_t> is_shareable_;
   std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
-  std::vector<std::uint8_t> steady_flag_;  ///< per cell: a growth candidate of the current scan (else 0)
+  /// Per-cell scratch, all zero between uses: applyScan's watch flags, then the current scan's growth
+  /// candidates (steadyShareable) until processScan resets them.
+  std::vector<std::uint8_t> cell_flags_;
   std::map<std::string, SharedObstacle> shared_;
   WorldBounds dirty_;
   FleetRobots fleet_robots_;  ///< fleet robots' footprints: never shared

@@ -1,0 +1,204 @@
+// applyScan's watch against an oracle that walks every beam cell by cell (raytraceLine with CollectAction) and
+// applies the documented rules directly: random grids, scans, watched cells, regions and loose cells. The
+// watch walks only the beams pointing at a region and only the steps inside it; this checks that it finds
+// exactly the cells and step positions the full walk finds.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <set>
+#include <vector>
+
+#include "sharing_layer/cost_values.h"
+#include "sharing_layer/raytrace.h"
+#include "sharing_layer/scan_update.h"
+
+using namespace sharing_layer;
+
+namespace
+{
+struct Expected
+{
+  std::vector<std::uint32_t> cleared, free, hit;
+};
+
+/// The rules of ScanTouch::watched_* for a scan whose points all lie inside the grid and inside the height
+/// limits, with the origin inside the grid (no clipping).
+Expected oracle(const GridGeometry& g, const Observation& obs, const ScanLimits& limits, const ScanWatch& watch)
+{
+  std::set<std::uint32_t> watched(watch.cells.begin(), watch.cells.end());
+  watched.insert(watch.loose_cells.begin(), watch.loose_cells.end());
+  const double ox = obs.origin.x, oy = obs.origin.y;
+  unsigned int x0 = 0, y0 = 0;
+  g.worldToMap(ox, oy, x0, y0);
+  std::set<std::uint32_t> visited, deep, marked, hit;
+  for (std::size_t pi = 0; pi < obs.points.size(); ++pi)
+  {
+    const Point3& p = obs.points[pi];
+    unsigned int x1 = 0, y1 = 0;
+    g.worldToMap(p.x, p.y, x1, y1);
+    std::vector<std::uint32_t> cells;
+    CollectAction<std::vector<std::uint32_t>> collect{ &cells };
+    raytraceLine(collect, x0, y0, x1, y1, g.size_x, g.cellDistance(limits.raytrace_range));
+    // Shadow filter: the shortest planar range among the point and free_neighbours neighbours on each side.
+    double shortest = std::hypot(p.x - ox, p.y - oy);
+    for (std::size_t j = pi >= watch.free_neighbours ? pi - watch.free_neighbours : 0;
+         j <= std::min(obs.points.size() - 1, pi + watch.free_neighbours); ++j)
+    {
+      shortest = std::min(shortest, std::hypot(obs.points[j].x - ox, obs.points[j].y - oy));
+    }
+    const LineSteps line = lineSteps(x0, y0, x1, y1);
+    const unsigned int deep_steps =
+        stepsWithin((shortest - watch.free_margin) / g.resolution, line.abs_da, line.dist);
+    for (std::size_t step = 0; step < cells.size(); ++step)  // one cell per step along the dominant axis
+    {
+      visited.insert(cells[step]);
+      if (step < deep_steps)
+      {
+        deep.insert(cells[step]);
+      }
+    }
+    const std::uint32_t end = g.getIndex(x1, y1);
+    hit.insert(end);
+    const double dz = p.z - obs.origin.z;
+    if ((p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz < limits.obstacle_range * limits.obstacle_range)
+    {
+      marked.insert(end);
+    }
+  }
+  Expected e;
+  for (std::uint32_t c : watched)
+  {
+    if (visited.count(c) && !marked.count(c))
+    {
+      e.cleared.push_back(c);
+      if (deep.count(c) && !hit.count(c))
+      {
+        e.free.push_back(c);
+      }
+    }
+    if (hit.count(c))
+    {
+      e.hit.push_back(c);
+    }
+  }
+  return e;
+}
+}  // namespace
+
+TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
+{
+  std::mt19937 rng(2026);
+  std::size_t results = 0;
+  for (int trial = 0; trial < 1500; ++trial)
+  {
+    const unsigned int w = 30 + rng() % 90, h = 30 + rng() % 90;
+    const GridGeometry g(0.05, -1.0, 2.0, w, h);
+    CostGrid grid(g, NO_INFORMATION);
+    std::uniform_real_distribution<double> ux(g.origin_x + 0.001, g.endX() - 0.001);
+    std::uniform_real_distribution<double> uy(g.origin_y + 0.001, g.endY() - 0.001);
+    Observation obs;
+    obs.origin = Point3{ ux(rng), uy(rng), 0.3 };
+    const int n = 1 + static_cast<int>(rng() % 150);
+    if (trial % 2 == 0)
+    {
+      for (int i = 0; i < n; ++i)
+      {
+        obs.points.push_back(Point3{ ux(rng), uy(rng), 0.3 });
+      }
+    }
+    else  // a scan: points in angle order, ranges that jump now and then (occlusion edges)
+    {
+      double range = 1.0;
+      for (int i = 0; i < n; ++i)
+      {
+        if (rng() % 5 == 0)
+        {
+          range = 0.1 + (rng() % 80) * 0.05;
+        }
+        const double a = 6.283 * i / n;
+        const double x = std::min(std::max(obs.origin.x + range * std::cos(a), ux.a()), ux.b());
+        const double y = std::min(std::max(obs.origin.y + range * std::sin(a), uy.a()), uy.b());
+        obs.points.push_back(Point3{ x, y, 0.3 });
+      }
+    }
+    ScanLimits limits;
+    limits.obstacle_range = 0.3 + (rng() % 40) * 0.1;
+    limits.raytrace_range = 0.3 + (rng() % 60) * 0.1;
+    ScanWatch watch;
+    watch.free_margin = (rng() % 5) * 0.05;
+    watch.free_neighbours = rng() % 4;
+    const bool with_regions = rng() % 2 == 0;
+    for (int i = 0, k = static_cast<int>(rng() % 12); i < k; ++i)  // blobs, each covered by a region
+    {
+      const int cx = static_cast<int>(rng() % w), cy = static_cast<int>(rng() % h);
+      const int rx = static_cast<int>(rng() % 6), ry = static_cast<int>(rng() % 6);
+      CellRect r{ std::max(0, cx - rx), std::max(0, cy - ry), std::min<int>(w - 1, cx + rx),
+                  std::min<int>(h - 1, cy + ry) };
+      for (int y = r.min_y; y <= r.max_y; ++y)
+      {
+        for (int x = r.min_x; x <= r.max_x; ++x)
+        {
+          if (rng() % 3 == 0)
+          {
+            watch.cells.push_back(g.getIndex(x, y));
+          }
+        }
+      }
+      watch.regions.push_back(r);
+    }
+    if (!with_regions)
+    {
+      watch.regions.clear();  // every cell walked on its own
+    }
+    for (int i = 0, k = static_cast<int>(rng() % 30); i < k; ++i)
+    {
+      watch.loose_cells.push_back(static_cast<std::uint32_t>(rng() % g.cellCount()));
+    }
+    for (int i = 0, k = static_cast<int>(rng() % 10); i < k; ++i)  // endpoint cells: hit, and often marked
+    {
+      const Point3& p = obs.points[rng() % obs.points.size()];
+      unsigned int mx = 0, my = 0;
+      g.worldToMap(p.x, p.y, mx, my);
+      watch.loose_cells.push_back(g.getIndex(mx, my));
+    }
+    std::vector<std::uint8_t> scratch;
+    if (rng() % 2 == 0)
+    {
+      scratch.assign(g.cellCount(), 0);
+      watch.scratch = scratch.data();
+      watch.scratch_size = scratch.size();
+    }
+
+    const Expected expected = oracle(g, obs, limits, watch);
+    const ScanTouch touch = applyScan(grid, obs, limits, watch);
+    ASSERT_EQ(expected.cleared, touch.watched_cleared) << "trial " << trial;
+    ASSERT_EQ(expected.free, touch.watched_free) << "trial " << trial;
+    ASSERT_EQ(expected.hit, touch.watched_hit) << "trial " << trial;
+    ASSERT_TRUE(std::all_of(scratch.begin(), scratch.end(), [](std::uint8_t f) { return f == 0; }))
+        << "trial " << trial << ": the scratch must come back zeroed";
+    results += expected.cleared.size() + expected.free.size() + expected.hit.size();
+  }
+  EXPECT_GT(results, 10000u);  // the trials exercise the rules, not only empty watches
+}
+
+TEST(ScanWatch, ScratchOfTheWrongSizeIsRefused)
+{
+  const GridGeometry g(0.1, 0.0, 0.0, 10, 10);
+  CostGrid grid(g, FREE_SPACE);
+  Observation obs;
+  obs.origin = Point3{ 0.05, 0.05, 0.0 };
+  obs.points = { Point3{ 0.85, 0.05, 0.0 } };
+  std::vector<std::uint8_t> scratch(50, 0);
+  ScanWatch watch;
+  watch.cells = { 3 };
+  watch.scratch = scratch.data();
+  watch.scratch_size = scratch.size();
+  EXPECT_THROW(applyScan(grid, obs, ScanLimits(), watch), std::invalid_argument);
+  watch.cells.clear();
+  watch.loose_cells = { 100 };  // outside the grid
+  watch.scratch = nullptr;
+  watch.scratch_size = 0;
+  EXPECT_THROW(applyScan(grid, obs, ScanLimits(), watch), std::invalid_argument);
+}
