@@ -92,10 +92,59 @@ def test_footprints_are_advertised_received_and_forgotten(ros_graph, broker, obs
         assert node.poll() is None, "a bridge died"
 
 
+def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_graph, broker, observer, wait_for):
+    """A peer's layer excludes a driving robot where its last advert put it: a heartbeat-old pose has moved
+    on, and the laser marks the robot's front, which the peer then shares as an obstacle (seen in the fleet
+    bench). So adverts go out whenever the footprint moved footprint_min_move (default 0.1 m), and the
+    receiving bridge passes each one on at once; here the heartbeat is slow (0.5 Hz) so that neither can
+    pass for the other."""
+    params = ["broker_url:=" + broker.url, "footprint_rate:=0.5", "robot_timeout:=5.0"]
+    ros_graph.bridge("robot_0", *params)
+    ros_graph.bridge("robot_1", *params)
+    probe = ros_graph.probe("robot_0", "robot_1")
+    wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
+
+    def square_at(x):
+        return [[x + px - 1.0, py] for px, py in SQUARE]
+
+    # Standing: the first advert is the heartbeat.
+    def standing():
+        probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(1.0)})
+        return robot_0_adverts(observer)
+    wait_for(standing, timeout=15, what="robot_0's first (heartbeat) advert")
+    wait_fleet(probe, "robot_1", lambda robots: robots, wait_for, what="robot_1 knows robot_0")
+    before = len(robot_0_adverts(observer))
+
+    # Driving: 10 steps of 0.2 m, each published once (within 2 s: at most one heartbeat).
+    xs = [1.0 + 0.2 * (k + 1) for k in range(10)]
+    for x in xs:
+        probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(x)})
+        time.sleep(0.15)
+    wait_fleet(probe, "robot_1", lambda robots: robots and robots[0]["points"][0][0] == pytest.approx(xs[-1]),
+               wait_for, what="robot_1 has robot_0's last pose")
+    moving = len(robot_0_adverts(observer)) - before
+    assert moving >= 8, "robot_0 advertised %d times over 10 steps of 0.2 m (footprint_min_move 0.1)" % moving
+    passed_on = {round(e["robots"][0]["points"][0][0], 3) for e in list(probe.events)
+                 if e.get("event") == "fleet_robots" and e["robot"] == "robot_1" and e["robots"]}
+    passed_on &= {round(x, 3) for x in xs}
+    assert len(passed_on) >= 8, "robot_1's bridge passed on %d of robot_0's 10 poses: %s" % (
+        len(passed_on), sorted(passed_on))
+
+    # Standing again, with jitter below footprint_min_move: the heartbeat only.
+    before = len(robot_0_adverts(observer))
+    for k in range(10):
+        probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(xs[-1] + 0.01 * (k % 3))})
+        time.sleep(0.1)
+    assert len(robot_0_adverts(observer)) - before <= 2, "a standing robot advertised on every footprint"
+    for node in ros_graph.nodes[:2]:
+        assert node.poll() is None, "a bridge died"
+
+
 @pytest.mark.parametrize("param, shown", [("footprint_rate:=0.0", "footprint_rate = 0.0"),
                                           ("robot_timeout:=-1.0", "robot_timeout = -1.0"),
                                           ("footprint_rate:=2.0 robot_timeout:=0.5", "robot_timeout = 0.5"),
                                           ("advertise_footprint:=maybe", "advertise_footprint = 'maybe'"),
+                                          ("footprint_min_move:=-0.1", "footprint_min_move = -0.1"),
                                           ("footprint_object_type:=coaty.F", "footprint_object_type = 'coaty.F'")])
 def test_bad_footprint_parameters_fail_at_start_up(ros_graph, param, shown):
     node = ros_graph.bridge("robot_0", *param.split())

@@ -148,6 +148,16 @@ class HeardRobot:
     heard_at: float
 
 
+def centroid(points):
+    """Mean of a footprint's vertices: where it is, for telling how far it moved."""
+    return (sum(x for x, _ in points) / len(points), sum(y for _, y in points) / len(points))
+
+
+def moved(a, b):
+    """Distance (m) between two centroids."""
+    return math.hypot(b[0] - a[0], b[1] - a[1])
+
+
 class FleetRobotTable:
     """The fleet robots a bridge has heard: the latest footprint per robot, forgotten ``timeout`` s
     after it was last heard (``clock`` is injected: the node passes ROS time). Its own robot is

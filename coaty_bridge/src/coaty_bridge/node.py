@@ -21,7 +21,7 @@ from sharing_msgs.safe_publisher import SafePublisher
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
-from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue
+from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue, centroid, moved
 
 LOG = logging.getLogger(__name__)
 
@@ -82,10 +82,12 @@ class RosoutHandler(logging.Handler):
 class FootprintConfig:
     """The node's footprint parameters (fleet robots are never shared); ValueError names a bad one."""
 
-    def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True):
+    def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True,
+                 min_move=0.1):
         if not isinstance(topic, str) or not topic:
             raise ValueError("parameter footprint_topic = %r: must be a topic name" % (topic,))
-        for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0)):
+        for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0),
+                                       ("footprint_min_move", min_move, 0.0, 10.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
                 raise ValueError("parameter %s = %r: must be %g..%g" % (name, value, low, high))
         if not isinstance(advertise, bool):
@@ -94,13 +96,15 @@ class FootprintConfig:
             raise ValueError("parameter robot_timeout = %r: shorter than two adverts at footprint_rate %r Hz; a "
                              "robot would be forgotten between adverts" % (robot_timeout, rate))
         self.topic, self.rate, self.robot_timeout, self.advertise = topic, float(rate), float(robot_timeout), advertise
+        self.min_move = float(min_move)
 
     @classmethod
     def from_params(cls):
         return cls(topic=rospy.get_param("~footprint_topic", "move_base/global_costmap/footprint"),
                    rate=rospy.get_param("~footprint_rate", 2.0),
                    robot_timeout=rospy.get_param("~robot_timeout", 3.0),
-                   advertise=rospy.get_param("~advertise_footprint", True))
+                   advertise=rospy.get_param("~advertise_footprint", True),
+                   min_move=rospy.get_param("~footprint_min_move", 0.1))
 
 
 def polygon_to_footprint(msg, robot, now):
@@ -169,6 +173,7 @@ class BridgeNode:
         self._lock = threading.Lock()
         self._counters = {}
         self._own_footprint = None   # (RobotFootprint, ROS time it arrived)
+        self._advertised = None      # (centroid, ROS time) of the last own advert sent
         self._stale_logged = False
         self.fleet = FleetRobotTable(config.robot_name, self.footprint_config.robot_timeout, rospy.get_time)
         # A message that cannot be delivered is dropped there; the publisher stays usable.
@@ -227,16 +232,33 @@ class BridgeNode:
             rospy.logwarn_throttle(5.0, "%s: footprint on %s not advertised: %s" % (
                 self.config.robot_name, self.footprint_config.topic, err))
             return
-        self._own_footprint = (footprint, rospy.get_time())
+        now = rospy.get_time()
+        self._own_footprint = (footprint, now)
+        # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
+        # at most min_move (plus transport), not by a whole heartbeat period of driving.
+        if self.footprint_config.advertise and self.footprint_config.min_move > 0.0:
+            with self._lock:
+                last = self._advertised
+            if last is not None and moved(last[0], centroid(footprint.points)) >= self.footprint_config.min_move:
+                self._advertise(footprint, now)
+
+    def _advertise(self, footprint, now):
+        if self.client.publish_footprint(footprint):
+            with self._lock:
+                self._advertised = (centroid(footprint.points), now)
 
     def _on_fleet_footprint(self, footprint, topic):
         """MQTT thread: a peer's footprint advert (already validated)."""
         known = footprint.robot in {r.footprint.robot for r in self.fleet.robots()}
         if footprint.robot != self.config.robot_name and not self.fleet.heard(footprint):
             self._count("footprints_out_of_order")
-        elif not known and footprint.robot != self.config.robot_name:
-            rospy.loginfo("%s: fleet robot %s heard (sourceId %s); its footprint is never shared",
-                          self.config.robot_name, footprint.robot, topic.source_id)
+        else:
+            if not known and footprint.robot != self.config.robot_name:
+                rospy.loginfo("%s: fleet robot %s heard (sourceId %s); its footprint is never shared",
+                              self.config.robot_name, footprint.robot, topic.source_id)
+            if footprint.robot != self.config.robot_name:
+                # At once, not at the next tick: a driving robot's footprint a tick old has moved on.
+                self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time()))
 
     def _footprint_tick(self, _event=None):
         """At footprint_rate: advertise this robot's footprint while it is fresh, forget silent fleet
@@ -245,8 +267,12 @@ class BridgeNode:
         own = self._own_footprint
         if self.footprint_config.advertise and own is not None:
             age = now - own[1]
+            with self._lock:
+                last = self._advertised
             if 0.0 <= age <= self.footprint_config.robot_timeout:
-                self.client.publish_footprint(own[0])
+                # The heartbeat: skipped when a motion advert went out since the previous tick.
+                if last is None or not 0.0 <= now - last[1] < 0.75 / self.footprint_config.rate:
+                    self._advertise(own[0], now)
                 self._stale_logged = False
             elif not self._stale_logged:
                 self._stale_logged = True
