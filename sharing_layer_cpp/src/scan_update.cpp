@@ -64,63 +64,71 @@ inline double pseudoAngle(double x, double y)
 }
 
 /// The scan's beams as raytraced (endpoint cells after clipping), bucketed by direction from the origin cell so
-/// that the beams able to cross a watched region are found without testing every beam against it.
+/// that the beams able to cross a watched region are found without testing every beam against it. Raytracing
+/// only records each beam's end cell; directions are computed when the first region is walked, and a beam's
+/// line when a region first reaches it, so a scan that walks nothing (every remembered cell marked again, no
+/// region) pays a few stores per beam.
 class BeamIndex
 {
 public:
   struct Beam
   {
     LineSteps line;
-    std::size_t point;                ///< index in the observation
+    std::size_t point;                 ///< index in the observation
     unsigned int deep_steps = kUnset;  ///< steps before which a watched cell counts as seen free (lazily)
   };
   static constexpr unsigned int kUnset = UINT_MAX;
   static constexpr int kBuckets = 2048;  ///< about 0.18 degrees each
 
-  explicit BeamIndex(std::size_t capacity)
+  BeamIndex(std::size_t capacity, unsigned int x0, unsigned int y0, unsigned int max_length)
+    : x0_(x0), y0_(y0), max_length_(max_length)
   {
-    beams_.reserve(capacity);
-    bucket_of_.reserve(capacity);
+    ends_.reserve(capacity);
   }
 
-  void add(const LineSteps& line, std::size_t point, int dx, int dy)
+  void add(std::size_t point, unsigned int x1, unsigned int y1)
   {
-    beams_.push_back(Beam{ line, point });
-    bucket_of_.push_back(static_cast<std::uint16_t>(bucketOf(pseudoAngle(dx, dy))));
+    ends_.push_back(End{ x1, y1, static_cast<std::uint32_t>(point) });
   }
 
-  /// Counting sort by bucket; call once after the last add.
+  /// Counting sort by bucket; once, after the last add and before the first forEachTowards.
   void build()
   {
+    std::vector<std::uint16_t> bucket_of(ends_.size());
     start_.assign(kBuckets + 1, 0);
-    for (std::uint16_t b : bucket_of_)
+    for (std::size_t i = 0; i < ends_.size(); ++i)
     {
-      ++start_[b + 1];
+      const int dx = static_cast<int>(ends_[i].x1) - static_cast<int>(x0_);
+      const int dy = static_cast<int>(ends_[i].y1) - static_cast<int>(y0_);
+      bucket_of[i] = static_cast<std::uint16_t>(bucketOf(pseudoAngle(dx, dy)));
+      ++start_[bucket_of[i] + 1];
     }
     for (int b = 0; b < kBuckets; ++b)
     {
       start_[b + 1] += start_[b];
     }
     // Placed from the back of each bucket: start_[b + 1] counts down to start_[b].
-    order_.resize(beams_.size());
+    order_.resize(ends_.size());
     std::vector<std::uint32_t> next(start_.begin() + 1, start_.end());
-    for (std::size_t i = beams_.size(); i-- > 0;)
+    for (std::size_t i = ends_.size(); i-- > 0;)
     {
-      order_[--next[bucket_of_[i]]] = static_cast<std::uint32_t>(i);
+      order_[--next[bucket_of[i]]] = static_cast<std::uint32_t>(i);
     }
+    beams_.assign(ends_.size(), Beam{});
+    line_ready_.assign(ends_.size(), 0);
   }
 
   /// Calls f(beam) for every beam whose direction can cross a cell of [min_x, max_x] x [min_y, max_y]: its
   /// pseudo-angle lies within that of the rectangle's corners grown by the slack of a Bresenham line.
   template <class F>
-  void forEachTowards(int min_x, int min_y, int max_x, int max_y, unsigned int x0, unsigned int y0, F f)
+  void forEachTowards(int min_x, int min_y, int max_x, int max_y, F f)
   {
     // A beam visits a cell only where the exact line between the start and end cells' centres passes within
     // half a cell of the cell's centre along b (Bresenham rounds b to the nearest cell), so only through the
     // cell's own square: its corners bound the directions, with a margin for rounding.
     constexpr double kGrow = 0.5 + 0.05;
-    const double x_lo = min_x - static_cast<double>(x0) - kGrow, x_hi = max_x - static_cast<double>(x0) + kGrow;
-    const double y_lo = min_y - static_cast<double>(y0) - kGrow, y_hi = max_y - static_cast<double>(y0) + kGrow;
+    const double x_lo = min_x - static_cast<double>(x0_) - kGrow, x_hi = max_x - static_cast<double>(x0_) + kGrow;
+    const double y_lo = min_y - static_cast<double>(y0_) - kGrow, y_hi = max_y - static_cast<double>(y0_) + kGrow;
     if (x_lo <= 0.5 && x_hi >= -0.5 && y_lo <= 0.5 && y_hi >= -0.5)
     {
       visit(0, kBuckets - 1, f);  // around the origin: every direction
@@ -149,9 +157,15 @@ public:
     visit(bucketOf(lo), bucketOf(hi), f);
   }
 
-  bool empty() const { return beams_.empty(); }
+  bool empty() const { return ends_.empty(); }
 
 private:
+  struct End
+  {
+    std::uint32_t x1, y1;
+    std::uint32_t point;
+  };
+
   static int bucketOf(double angle)
   {
     return std::min(kBuckets - 1, std::max(0, static_cast<int>(angle * (kBuckets / 4.0))));
@@ -161,12 +175,22 @@ private:
   {
     for (std::uint32_t k = start_[first]; k < start_[last + 1]; ++k)
     {
-      f(beams_[order_[k]]);
+      const std::uint32_t i = order_[k];
+      Beam& beam = beams_[i];
+      if (!line_ready_[i])
+      {
+        beam.line = lineSteps(x0_, y0_, ends_[i].x1, ends_[i].y1, max_length_);  // as raytraced
+        beam.point = ends_[i].point;
+        line_ready_[i] = 1;
+      }
+      f(beam);
     }
   }
 
+  unsigned int x0_, y0_, max_length_;
+  std::vector<End> ends_;
   std::vector<Beam> beams_;
-  std::vector<std::uint16_t> bucket_of_;
+  std::vector<std::uint8_t> line_ready_;
   std::vector<std::uint32_t> start_;  ///< per bucket: its first position in order_
   std::vector<std::uint32_t> order_;  ///< beam indexes by bucket
 };
@@ -249,12 +273,12 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   const double oy = observation.origin.y;
   unsigned int x0 = 0, y0 = 0;
   touch.origin_in_map = std::isfinite(observation.origin.z) && g.worldToMap(ox, oy, x0, y0);
-  BeamIndex beams(watching ? observation.points.size() : 0);
+  const unsigned int cell_raytrace_range = g.cellDistance(limits.raytrace_range);
+  BeamIndex beams(watching ? observation.points.size() : 0, x0, y0, cell_raytrace_range);
   if (touch.origin_in_map)
   {
     const double map_end_x = g.endX();
     const double map_end_y = g.endY();
-    const unsigned int cell_raytrace_range = g.cellDistance(limits.raytrace_range);
     SetCellAction clear{ costs, FREE_SPACE };
     for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
     {
@@ -304,7 +328,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
                   y0 * g.size_x + x0, line.end);
       if (watching)
       {
-        beams.add(line, pi, static_cast<int>(x1) - static_cast<int>(x0), static_cast<int>(y1) - static_cast<int>(y0));
+        beams.add(pi, x1, y1);
       }
     }
   }
@@ -421,7 +445,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         beams.build();
         built = true;
       }
-      beams.forEachTowards(r.min_x, r.min_y, r.max_x, r.max_y, x0, y0, [&](BeamIndex::Beam& beam) {
+      beams.forEachTowards(r.min_x, r.min_y, r.max_x, r.max_y, [&](BeamIndex::Beam& beam) {
         const LineSteps& line = beam.line;
         const int a0 = static_cast<int>(line.x_major ? x0 : y0);
         const int b0 = static_cast<int>(line.x_major ? y0 : x0);
