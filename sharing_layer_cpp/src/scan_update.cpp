@@ -4,6 +4,7 @@
 #include <cmath>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -63,22 +64,23 @@ inline double pseudoAngle(double x, double y)
   return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
 }
 
-/// The scan's beams as raytraced (endpoint cells after clipping), bucketed by direction from the origin cell so
-/// that the beams able to cross a watched region are found without testing every beam against it. Raytracing
-/// only records each beam's end cell; directions are computed when the first region is walked, and a beam's
-/// line when a region first reaches it, so a scan that walks nothing (every remembered cell marked again, no
-/// region) pays a few stores per beam.
+/// The scan's beams as raytraced (endpoint cells after clipping), found by direction from the origin cell so that
+/// the beams able to cross a watched region are found without walking every beam. Raytracing only records each
+/// beam's end cell. Directions are computed when the first region is walked; the first few regions test every
+/// beam's direction (a scan watching one obstacle pays no index), later ones use buckets sorted once. A beam's
+/// line is computed when a region first reaches it.
 class BeamIndex
 {
 public:
   struct Beam
   {
     LineSteps line;
-    std::size_t point;                 ///< index in the observation
-    unsigned int deep_steps = kUnset;  ///< steps before which a watched cell counts as seen free (lazily)
+    std::size_t point;         ///< index in the observation
+    unsigned int deep_steps;   ///< steps before which a watched cell counts as seen free (kUnset until needed)
   };
   static constexpr unsigned int kUnset = UINT_MAX;
-  static constexpr int kBuckets = 2048;  ///< about 0.18 degrees each
+  static constexpr int kBuckets = 2048;      ///< about 0.18 degrees each
+  static constexpr int kLinearQueries = 4;  ///< regions answered by testing every beam before buckets pay off
 
   BeamIndex(std::size_t capacity, unsigned int x0, unsigned int y0, unsigned int max_length)
     : x0_(x0), y0_(y0), max_length_(max_length)
@@ -91,38 +93,16 @@ public:
     ends_.push_back(End{ x1, y1, static_cast<std::uint32_t>(point) });
   }
 
-  /// Counting sort by bucket; once, after the last add and before the first forEachTowards.
-  void build()
-  {
-    std::vector<std::uint16_t> bucket_of(ends_.size());
-    start_.assign(kBuckets + 1, 0);
-    for (std::size_t i = 0; i < ends_.size(); ++i)
-    {
-      const int dx = static_cast<int>(ends_[i].x1) - static_cast<int>(x0_);
-      const int dy = static_cast<int>(ends_[i].y1) - static_cast<int>(y0_);
-      bucket_of[i] = static_cast<std::uint16_t>(bucketOf(pseudoAngle(dx, dy)));
-      ++start_[bucket_of[i] + 1];
-    }
-    for (int b = 0; b < kBuckets; ++b)
-    {
-      start_[b + 1] += start_[b];
-    }
-    // Placed from the back of each bucket: start_[b + 1] counts down to start_[b].
-    order_.resize(ends_.size());
-    std::vector<std::uint32_t> next(start_.begin() + 1, start_.end());
-    for (std::size_t i = ends_.size(); i-- > 0;)
-    {
-      order_[--next[bucket_of[i]]] = static_cast<std::uint32_t>(i);
-    }
-    beams_.assign(ends_.size(), Beam{});
-    line_ready_.assign(ends_.size(), 0);
-  }
-
   /// Calls f(beam) for every beam whose direction can cross a cell of [min_x, max_x] x [min_y, max_y]: its
-  /// pseudo-angle lies within that of the rectangle's corners grown by the slack of a Bresenham line.
+  /// pseudo-angle lies within that of the rectangle's corners grown by the slack of a Bresenham line. No add
+  /// after the first call.
   template <class F>
   void forEachTowards(int min_x, int min_y, int max_x, int max_y, F f)
   {
+    if (angles_.empty())
+    {
+      prepare();
+    }
     // A beam visits a cell only where the exact line between the start and end cells' centres passes within
     // half a cell of the cell's centre along b (Bresenham rounds b to the nearest cell), so only through the
     // cell's own square: its corners bound the directions, with a margin for rounding.
@@ -131,7 +111,7 @@ public:
     const double y_lo = min_y - static_cast<double>(y0_) - kGrow, y_hi = max_y - static_cast<double>(y0_) + kGrow;
     if (x_lo <= 0.5 && x_hi >= -0.5 && y_lo <= 0.5 && y_hi >= -0.5)
     {
-      visit(0, kBuckets - 1, f);  // around the origin: every direction
+      visit(0.0, 4.0, f);  // around the origin: every direction
       return;
     }
     const double corners[4][2] = { { x_lo, y_lo }, { x_hi, y_lo }, { x_lo, y_hi }, { x_hi, y_hi } };
@@ -150,11 +130,11 @@ public:
       {
         (v < 2.0 ? below : above) = v < 2.0 ? std::max(below, v) : std::min(above, v);
       }
-      visit(0, bucketOf(below), f);
-      visit(bucketOf(above), kBuckets - 1, f);
+      visit(0.0, below, f);
+      visit(above, 4.0, f);
       return;
     }
-    visit(bucketOf(lo), bucketOf(hi), f);
+    visit(lo, hi, f);
   }
 
   bool empty() const { return ends_.empty(); }
@@ -170,28 +150,90 @@ private:
   {
     return std::min(kBuckets - 1, std::max(0, static_cast<int>(angle * (kBuckets / 4.0))));
   }
-  template <class F>
-  void visit(int first, int last, F& f)
+
+  void prepare()
   {
-    for (std::uint32_t k = start_[first]; k < start_[last + 1]; ++k)
+    angles_.resize(ends_.size());
+    for (std::size_t i = 0; i < ends_.size(); ++i)
     {
-      const std::uint32_t i = order_[k];
-      Beam& beam = beams_[i];
-      if (!line_ready_[i])
+      const int dx = static_cast<int>(ends_[i].x1) - static_cast<int>(x0_);
+      const int dy = static_cast<int>(ends_[i].y1) - static_cast<int>(y0_);
+      angles_[i] = pseudoAngle(dx, dy);
+    }
+    beams_.reset(new Beam[ends_.size()]);  // left uninitialised: a beam is filled when first reached
+    line_ready_.assign(ends_.size(), 0);
+  }
+
+  /// Counting sort by bucket into order_; afterwards bucket b holds order_[start_[b] .. start_[b + 1]).
+  void buildBuckets()
+  {
+    start_.assign(kBuckets + 2, 0);
+    bucket_of_.resize(ends_.size());
+    for (std::size_t i = 0; i < ends_.size(); ++i)
+    {
+      bucket_of_[i] = static_cast<std::uint16_t>(bucketOf(angles_[i]));
+      ++start_[bucket_of_[i] + 2];
+    }
+    for (int b = 2; b < kBuckets + 2; ++b)
+    {
+      start_[b] += start_[b - 1];
+    }
+    // Bucket b's entries are placed from start_[b + 1] on, which then ends where bucket b + 1 begins.
+    order_.resize(ends_.size());
+    for (std::size_t i = 0; i < ends_.size(); ++i)
+    {
+      order_[start_[bucket_of_[i] + 1]++] = static_cast<std::uint32_t>(i);
+    }
+  }
+
+  template <class F>
+  void visitBeam(std::uint32_t i, F& f)
+  {
+    Beam& beam = beams_[i];
+    if (!line_ready_[i])
+    {
+      beam.line = lineSteps(x0_, y0_, ends_[i].x1, ends_[i].y1, max_length_);  // as raytraced
+      beam.point = ends_[i].point;
+      beam.deep_steps = kUnset;
+      line_ready_[i] = 1;
+    }
+    f(beam);
+  }
+
+  /// Every beam whose pseudo-angle lies in [lo, hi] (and, once bucketed, some just outside it).
+  template <class F>
+  void visit(double lo, double hi, F& f)
+  {
+    if (queries_ < kLinearQueries)
+    {
+      ++queries_;
+      for (std::uint32_t i = 0; i < angles_.size(); ++i)
       {
-        beam.line = lineSteps(x0_, y0_, ends_[i].x1, ends_[i].y1, max_length_);  // as raytraced
-        beam.point = ends_[i].point;
-        line_ready_[i] = 1;
+        if (angles_[i] >= lo && angles_[i] <= hi)
+        {
+          visitBeam(i, f);
+        }
       }
-      f(beam);
+      return;
+    }
+    if (order_.size() != ends_.size())
+    {
+      buildBuckets();
+    }
+    for (std::uint32_t k = start_[bucketOf(lo)]; k < start_[bucketOf(hi) + 1]; ++k)
+    {
+      visitBeam(order_[k], f);
     }
   }
 
   unsigned int x0_, y0_, max_length_;
   std::vector<End> ends_;
-  std::vector<Beam> beams_;
+  std::vector<double> angles_;  ///< pseudo-angle of each beam's end cell from the origin cell
+  std::unique_ptr<Beam[]> beams_;
   std::vector<std::uint8_t> line_ready_;
-  std::vector<std::uint32_t> start_;  ///< per bucket: its first position in order_
+  int queries_ = 0;
+  std::vector<std::uint16_t> bucket_of_;
+  std::vector<std::uint32_t> start_;  ///< see buildBuckets
   std::vector<std::uint32_t> order_;  ///< beam indexes by bucket
 };
 
@@ -438,13 +480,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       const double deep_until = (std::sqrt(shadow_sq) - watch.free_margin) / g.resolution;
       return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist);
     };
-    bool built = false;
     const auto walk_region = [&](const CellRect& r) {
-      if (!built)
-      {
-        beams.build();
-        built = true;
-      }
       beams.forEachTowards(r.min_x, r.min_y, r.max_x, r.max_y, [&](BeamIndex::Beam& beam) {
         const LineSteps& line = beam.line;
         const int a0 = static_cast<int>(line.x_major ? x0 : y0);

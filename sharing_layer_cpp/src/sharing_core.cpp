@@ -393,46 +393,62 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   std::vector<std::uint32_t> seen_again;  // present cells this scan marked: an observation of the obstacle
   std::vector<std::uint32_t> steady = steadyShareable();  // growth candidates, computed once per scan
   const std::vector<std::uint32_t> steady_all = steady;   // to reset their flags
+  // Growth candidates lie within obstacle_range of the robot, most obstacles in view far beyond: their box
+  // rules those out without looking at their rings.
+  CellRect steady_box{ std::numeric_limits<int>::max(), std::numeric_limits<int>::max(),
+                       std::numeric_limits<int>::min(), std::numeric_limits<int>::min() };
+  for (std::uint32_t index : steady)
+  {
+    const int x = static_cast<int>(index % g.size_x), y = static_cast<int>(index / g.size_x);
+    steady_box = CellRect{ std::min(steady_box.min_x, x), std::min(steady_box.min_y, y),
+                           std::max(steady_box.max_x, x), std::max(steady_box.max_y, y) };
+  }
+  // Calls f(index) for the cells of a sorted list inside rectangle r, in order. One search per list and
+  // rectangle: the cells between its first and last row that lie outside its columns are few (the lists hold
+  // this scan's events, not the grid).
+  const auto for_each_in = [&g](const std::vector<std::uint32_t>& sorted, const CellRect& r, auto f) {
+    const std::uint32_t first = g.getIndex(static_cast<unsigned int>(r.min_x), static_cast<unsigned int>(r.min_y));
+    const std::uint32_t last = g.getIndex(static_cast<unsigned int>(r.max_x), static_cast<unsigned int>(r.max_y));
+    for (auto it = std::lower_bound(sorted.begin(), sorted.end(), first); it != sorted.end() && *it <= last; ++it)
+    {
+      const int x = static_cast<int>(*it % g.size_x);
+      if (x >= r.min_x && x <= r.max_x)
+      {
+        f(*it);
+      }
+    }
+  };
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
     ObstacleUpdate update;
     seen_again.clear();
-    // The lists are sorted: each row of the rectangle is one contiguous index range in them.
-    for (int y = r.min_y; y <= r.max_y; ++y)
+    for_each_in(marked_watched, r, [&](std::uint32_t index) {
+      // Walls, and a fleet robot standing on the cell: neither new cells nor an observation of the obstacle.
+      if (!static_filter_.isStatic(index) && !fleet_robots_.excludes(index))
+      {
+        (obstacle->cells.isPresent(index) ? seen_again : update.marked).push_back(index);
+      }
+    });
+    // A sign of occupancy: the evidence of free space starts again.
+    for_each_in(occupied, r, [&](std::uint32_t index) { obstacle->free_streaks.erase(index); });
+    // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough (a beam
+    // grazing along a face through the free part of its cells, localisation jitter): an unbroken streak of
+    // clearing_scans scans over clearing_time clears the cell. (occupied and seen_free share no cell.)
+    for_each_in(seen_free, r, [&](std::uint32_t index) {
+      if (obstacle->cells.isPresent(index) &&
+          obstacle->free_streaks[index].add(now_s, params_.clearing_scans, params_.clearing_time))
+      {
+        obstacle->free_streaks.erase(index);
+        update.cleared.push_back(index);
+      }
+    });
+    const int gap = static_cast<int>(params_.cluster_gap);
+    if (!steady.empty() && r.min_x - gap <= steady_box.max_x && steady_box.min_x <= r.max_x + gap &&
+        r.min_y - gap <= steady_box.max_y && steady_box.min_y <= r.max_y + gap)
     {
-      const std::uint32_t row_first = g.getIndex(static_cast<unsigned int>(r.min_x), static_cast<unsigned int>(y));
-      const std::uint32_t row_last = g.getIndex(static_cast<unsigned int>(r.max_x), static_cast<unsigned int>(y));
-      for (auto it = std::lower_bound(marked_watched.begin(), marked_watched.end(), row_first);
-           it != marked_watched.end() && *it <= row_last; ++it)
-      {
-        // Walls, and a fleet robot standing on the cell: neither new cells nor an observation of the obstacle.
-        if (static_filter_.isStatic(*it) || fleet_robots_.excludes(*it))
-        {
-          continue;
-        }
-        (obstacle->cells.isPresent(*it) ? seen_again : update.marked).push_back(*it);
-      }
-      for (auto it = std::lower_bound(occupied.begin(), occupied.end(), row_first);
-           it != occupied.end() && *it <= row_last; ++it)
-      {
-        obstacle->free_streaks.erase(*it);  // a sign of occupancy: the evidence of free space starts again
-      }
-      // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough (a
-      // beam grazing along a face through the free part of its cells, localisation jitter): an unbroken
-      // streak of clearing_scans scans over clearing_time clears the cell.
-      for (auto it = std::lower_bound(seen_free.begin(), seen_free.end(), row_first);
-           it != seen_free.end() && *it <= row_last; ++it)
-      {
-        if (obstacle->cells.isPresent(*it) &&
-            obstacle->free_streaks[*it].add(now_s, params_.clearing_scans, params_.clearing_time))
-        {
-          obstacle->free_streaks.erase(*it);
-          update.cleared.push_back(*it);
-        }
-      }
+      growInto(*obstacle, steady, update.marked);
     }
-    growInto(*obstacle, steady, update.marked);
     // Lease: cells seen occupied again renew the obstacle; sent when nobody renewed it for a while.
     if (update.marked.empty() && !seen_again.empty() &&
         !(now_s - obstacle->last_observation < params_.lease_renewal_interval))
