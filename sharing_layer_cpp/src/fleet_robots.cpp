@@ -193,6 +193,20 @@ bool FleetRobots::forget(const std::string& name)
   return true;
 }
 
+void FleetRobots::setGeometry(const GridGeometry& geometry)
+{
+  const std::map<std::string, FleetRobot> known = robots_;
+  const std::map<std::string, std::pair<double, double>> motions = motion_;
+  clear();
+  count_.clear();  // sized for the old grid
+  geometry_ = geometry;
+  for (const auto& entry : known)
+  {
+    const auto motion = motions.find(entry.first);
+    update(entry.second, nullptr, motion != motions.end() ? motion->second : std::make_pair(0.0, 0.0));
+  }
+}
+
 void FleetRobots::clear()
 {
   for (const auto& entry : cells_)

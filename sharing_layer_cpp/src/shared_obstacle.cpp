@@ -17,6 +17,39 @@ std::uint32_t VersionedCellSet::sourceId(const std::string& source)
   return static_cast<std::uint32_t>(sources_.size() - 1);
 }
 
+std::size_t VersionedCellSet::remap(const std::function<bool(std::uint32_t, std::uint32_t&)>& to_new)
+{
+  std::unordered_map<std::uint32_t, CellState> moved;
+  std::size_t dropped = 0;
+  for (const auto& entry : cells_)
+  {
+    std::uint32_t index = 0;
+    if (!to_new(entry.first, index))
+    {
+      dropped += entry.second.present;
+      continue;
+    }
+    const CellState& cell = entry.second;
+    const auto found = moved.find(index);
+    if (found == moved.end())
+    {
+      moved.emplace(index, cell);
+    }
+    else if (newer(found->second, cell.version, cell.source, !cell.present))
+    {
+      found->second = cell;
+    }
+  }
+  cells_.swap(moved);
+  present_count_ = 0;
+  for (const auto& entry : cells_)
+  {
+    present_count_ += entry.second.present;
+  }
+  present_cache_valid_ = false;
+  return dropped;
+}
+
 bool VersionedCellSet::newer(const CellState& cell, std::uint64_t version, std::uint32_t source,
                              bool or_equal) const
 {

@@ -1250,6 +1250,110 @@ bool SharingCore::expire(const std::string& uuid)
   return true;
 }
 
+MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observations)
+{
+  const GridGeometry old = this->geometry();
+  MoveReport report;
+  // Where an old cell's centre lies on the new grid.
+  const auto to_new = [&old, &geometry](std::uint32_t index, std::uint32_t& moved) {
+    unsigned int mx = 0, my = 0;
+    old.indexToCells(index, mx, my);
+    double wx = 0.0, wy = 0.0;
+    old.mapToWorld(mx, my, wx, wy);
+    unsigned int nx = 0, ny = 0;
+    if (!geometry.worldToMap(wx, wy, nx, ny))
+    {
+      return false;
+    }
+    moved = geometry.getIndex(nx, ny);
+    return true;
+  };
+
+  // Allocate first: nothing changes when the new grid cannot be had.
+  CostGrid obstacles(geometry, FREE_SPACE);
+  std::vector<std::uint8_t> is_shareable(geometry.cellCount(), 0);
+  std::vector<std::uint16_t> monitored(geometry.cellCount(), 0);
+  std::vector<std::uint8_t> cell_flags(geometry.cellCount(), 0);
+
+  std::vector<std::uint32_t> shareable;
+  if (keep_observations)
+  {
+    for (std::uint32_t index = 0; index < old.cellCount(); ++index)
+    {
+      std::uint32_t moved = 0;
+      if (obstacles_.at(index) != FREE_SPACE && to_new(index, moved))
+      {
+        obstacles.set(moved, obstacles_.at(index));
+        report.obstacle_cells_kept += obstacles_.at(index) == LETHAL_OBSTACLE;
+      }
+    }
+    for (std::uint32_t index : shareable_)
+    {
+      std::uint32_t moved = 0;
+      if (to_new(index, moved) && !is_shareable[moved])
+      {
+        is_shareable[moved] = 1;
+        shareable.push_back(moved);
+      }
+    }
+    std::sort(shareable.begin(), shareable.end());
+  }
+  std::unordered_map<std::uint32_t, RememberedCell> memory;
+  for (const auto& entry : memory_)
+  {
+    std::uint32_t moved = 0;
+    if (to_new(entry.first, moved))
+    {
+      const auto found = memory.find(moved);
+      if (found == memory.end() || found->second.time < entry.second.time)
+      {
+        memory[moved] = entry.second;
+      }
+    }
+  }
+
+  obstacles_ = std::move(obstacles);
+  is_shareable_.swap(is_shareable);
+  shareable_.swap(shareable);
+  monitored_.swap(monitored);
+  cell_flags_.swap(cell_flags);
+  memory_.swap(memory);
+  static_costs_.clear();
+  unknown_.clear();
+  static_filter_ = StaticMapFilter();
+  fleet_robots_.setGeometry(geometry);
+  last_new_marked_.clear();
+  last_far_hits_.clear();
+  last_robot_marked_.clear();
+  last_static_marked_ = 0;
+  dirty_ = emptyBounds();
+
+  for (auto& entry : shared_)
+  {
+    SharedObstacle& obstacle = entry.second;
+    report.shared_cells_dropped += obstacle.cells.remap(to_new);
+    std::unordered_map<std::uint32_t, FreeStreak> streaks;
+    for (const auto& streak : obstacle.free_streaks)
+    {
+      std::uint32_t moved = 0;
+      if (to_new(streak.first, moved) && obstacle.cells.isPresent(moved))
+      {
+        streaks[moved] = streak.second;
+      }
+    }
+    obstacle.free_streaks.swap(streaks);
+    obstacle.rectangle_cells = obstacle.rectangle.cells(geometry);
+    if (!obstacle.rectangle_cells.empty())
+    {
+      countRectangle(obstacle.rectangle_cells, +1);
+      dropShareableInside(obstacle.rectangle_cells);
+    }
+    report.obstacles_out_of_grid += obstacle.cells.presentCount() == 0;
+    markDirty(obstacle.cells.present());
+  }
+  return report;
+}
+
 void SharingCore::resetObstacleLayer()
 {
   obstacles_.reset();

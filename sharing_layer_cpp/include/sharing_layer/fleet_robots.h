@@ -69,6 +69,10 @@ public:
    */
   void replaceAll(const std::vector<FleetRobot>& robots);
 
+  /// @brief Moves onto another grid (a resized or moved costmap): the known robots, with their motion, are
+  /// excluded anew in it.
+  void setGeometry(const GridGeometry& geometry);
+
   /// @return false when the name is unknown
   bool forget(const std::string& name);
   /// @brief Forgets everything.

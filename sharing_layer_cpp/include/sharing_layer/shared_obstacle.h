@@ -2,6 +2,7 @@
 #define SHARING_LAYER_SHARED_OBSTACLE_H
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -46,6 +47,12 @@ public:
   std::size_t presentCount() const { return present_count_; }
   /// @return cells with any stamp, tombstones included
   std::size_t trackedCount() const { return cells_.size(); }
+  /**
+   * @brief Moves every cell, tombstones included, with its stamp, to the index `to_new` gives it (another
+   * grid); cells it refuses (returns false for) are dropped. Cells landing on one index keep the greatest
+   * stamp, a clear winning a tie, as apply() would. @return present cells dropped
+   */
+  std::size_t remap(const std::function<bool(std::uint32_t, std::uint32_t&)>& to_new);
 
 private:
   struct CellState

@@ -127,6 +127,14 @@ struct ApplyResult
   std::string error;           ///< why not, when !ok
 };
 
+/// @brief What moving the layer onto another grid (SharingCore::moveTo) kept and dropped.
+struct MoveReport
+{
+  std::size_t shared_cells_dropped = 0;    ///< present shared cells whose centre lies off the new grid
+  std::size_t obstacles_out_of_grid = 0;   ///< shared obstacles left with no present cell on it (still held)
+  std::size_t obstacle_cells_kept = 0;     ///< lethal cells of the own obstacle grid carried over
+};
+
 /// @brief Bounds in world coordinates touched since the last call to takeDirtyBounds.
 struct WorldBounds
 {
@@ -223,6 +231,19 @@ public:
 
   /// @brief Removes an expired obstacle; @return false when the uuid is unknown
   bool expire(const std::string& uuid);
+
+  /**
+   * @brief Moves the layer onto another grid: costmap_2d's resize (matchSize, keep_observations false: the
+   * layer's own grid starts empty, as Costmap2D::resizeMap leaves it) or a rolling window's origin move
+   * (updateOrigin, keep_observations true: what the sensors marked stays where it is in the world, the rest
+   * of the new grid is free). Shared obstacles keep their cells by world position: each cell, tombstones
+   * and version stamps included, goes to the new cell holding its centre; cells off the new grid are
+   * dropped (and counted), and an obstacle with none left is still held, for its updates and expiry. The
+   * trigger memory, fleet robots and plan follow by world position; the static and unknown maps must be set
+   * again. The new grid's arrays are allocated before anything changes, so a std::bad_alloc leaves the layer
+   * as it was. Costs one pass over the old grid when keep_observations (a rolling window's grid is small).
+   */
+  MoveReport moveTo(const GridGeometry& geometry, bool keep_observations);
 
   /// @brief The obstacle-layer reset on reaching a goal: the obstacle grid and the shareable
   /// cells are cleared; shared obstacles stay.

@@ -1,0 +1,232 @@
+// Moving the layer onto another grid: costmap_2d's resize (matchSize) and a rolling window's origin move
+// (updateOrigin). Shared obstacles, their stamps and monitoring, the own observations (when kept), the trigger
+// memory and the fleet robots must stay where they are in the world; what falls off the new grid is dropped and
+// counted.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <utility>
+#include <vector>
+
+#include "sharing_layer/cost_values.h"
+#include "sharing_layer/sharing_core.h"
+#include "sim_scan.h"
+
+using namespace sharing_layer;
+using namespace sharing_layer::test;
+
+namespace
+{
+using WorldCell = std::pair<long, long>;  ///< a cell centre in centimetres
+
+std::set<WorldCell> worldCells(const GridGeometry& g, const std::vector<std::uint32_t>& cells)
+{
+  std::set<WorldCell> out;
+  for (std::uint32_t index : cells)
+  {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(mx, my, wx, wy);
+    out.emplace(std::lround(wx * 100.0), std::lround(wy * 100.0));
+  }
+  return out;
+}
+
+/// The outline cells of the square [x0, x0 + side] x [y0, y0 + side] on g.
+std::vector<std::uint32_t> outline(const GridGeometry& g, double x0, double y0, double side)
+{
+  unsigned int ax = 0, ay = 0, bx = 0, by = 0;
+  g.worldToMap(x0 + 0.001, y0 + 0.001, ax, ay);
+  g.worldToMap(x0 + side - 0.001, y0 + side - 0.001, bx, by);
+  std::vector<std::uint32_t> cells;
+  for (unsigned int y = ay; y <= by; ++y)
+  {
+    for (unsigned int x = ax; x <= bx; ++x)
+    {
+      if (x == ax || x == bx || y == ay || y == by)
+      {
+        cells.push_back(g.getIndex(x, y));
+      }
+    }
+  }
+  return cells;
+}
+
+std::uint32_t indexAt(const GridGeometry& g, double wx, double wy)
+{
+  unsigned int mx = 0, my = 0;
+  EXPECT_TRUE(g.worldToMap(wx, wy, mx, my)) << wx << ", " << wy;
+  return g.getIndex(mx, my);
+}
+}  // namespace
+
+TEST(MoveTo, AnOriginMoveKeepsSharedCellsWhereTheyAreInTheWorldAndDropsWhatFallsOff)
+{
+  SharingCore core = makeCore();
+  const GridGeometry old = core.geometry();
+  const std::vector<std::uint32_t> kept = outline(old, 6.0, 5.0, 0.4);
+  const std::vector<std::uint32_t> lost = outline(old, 0.6, 0.6, 0.3);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("kept", kept, Subsection(5.8, 4.8, 6.6, 5.6)), 0.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("lost", lost, Subsection(0.5, 0.5, 1.0, 1.0)), 0.0).ok);
+  // A cleared cell (a tombstone with version 2): an older mark arriving after the move must not bring it back.
+  ObstacleUpdate clear = sharedUpdate("kept", {}, Subsection(5.8, 4.8, 6.6, 5.6), 2);
+  clear.cleared = { kept.front() };
+  ASSERT_TRUE(core.applyShared(clear, 1.0).ok);
+  const std::set<WorldCell> before = worldCells(old, core.sharedCells("kept"));
+  ASSERT_EQ(before.size(), kept.size() - 1);
+
+  const GridGeometry moved(0.05, 2.0, 1.0, 200, 200);  // a rolling window 2 m right, 1 m up
+  const MoveReport report = core.moveTo(moved, true);
+
+  EXPECT_TRUE(core.geometry().sameAs(moved));
+  EXPECT_EQ(worldCells(moved, core.sharedCells("kept")), before);
+  EXPECT_EQ(report.shared_cells_dropped, lost.size());
+  EXPECT_EQ(report.obstacles_out_of_grid, 1u);
+  EXPECT_EQ(core.sharedObstacles().count("lost"), 1u) << "still held, for its updates and its expiry";
+  EXPECT_TRUE(core.sharedCells("lost").empty());
+
+  const std::uint32_t tombstone = indexAt(moved, 6.0 + 0.025, 5.0 + 0.025);
+  ObstacleUpdate late = sharedUpdate("kept", { tombstone }, Subsection(5.8, 4.8, 6.6, 5.6), 1, "robot_2");
+  late.geometry = moved;
+  ASSERT_TRUE(core.applyShared(late, 2.0).ok);
+  EXPECT_EQ(worldCells(moved, core.sharedCells("kept")), before) << "the cleared cell came back";
+
+  std::vector<std::uint8_t> master(moved.cellCount(), FREE_SPACE);
+  core.drawShared(master.data(), master.size());
+  std::vector<std::uint32_t> drawn;
+  for (std::uint32_t i = 0; i < master.size(); ++i)
+  {
+    if (master[i] == LETHAL_OBSTACLE)
+    {
+      drawn.push_back(i);
+    }
+  }
+  EXPECT_EQ(worldCells(moved, drawn), before);
+}
+
+TEST(MoveTo, TheOwnObservationsFollowTheWorldOnAnOriginMoveAndStartEmptyOnAResize)
+{
+  SimWorld world = walledWorld();
+  world.box(6.0, 5.0, 6.4, 5.4);
+  SharingCore rolling = makeCore();
+  SharingCore resized = makeCore();
+  const Observation scan = world.scan(4.5, 5.2, 0.0);
+  rolling.processScan(scan, 0.0);
+  resized.processScan(scan, 0.0);
+  const GridGeometry old = rolling.geometry();
+  std::vector<std::uint32_t> lethal;
+  for (std::uint32_t i = 0; i < old.cellCount(); ++i)
+  {
+    if (rolling.obstacleGrid().at(i) == LETHAL_OBSTACLE)
+    {
+      lethal.push_back(i);
+    }
+  }
+  ASSERT_FALSE(lethal.empty());
+
+  const GridGeometry moved(0.05, 1.0, 2.0, 200, 200);
+  const MoveReport kept = rolling.moveTo(moved, true);
+  std::vector<std::uint32_t> lethal_after;
+  for (std::uint32_t i = 0; i < moved.cellCount(); ++i)
+  {
+    if (rolling.obstacleGrid().at(i) == LETHAL_OBSTACLE)
+    {
+      lethal_after.push_back(i);
+    }
+  }
+  EXPECT_EQ(worldCells(moved, lethal_after), worldCells(old, lethal));
+  EXPECT_EQ(kept.obstacle_cells_kept, lethal.size());
+  EXPECT_EQ(worldCells(moved, rolling.shareableCells()).size(), rolling.shareableCells().size());
+  EXPECT_FALSE(rolling.shareableCells().empty()) << "the block's face is still this robot's candidate";
+
+  const GridGeometry larger(0.05, -1.0, -1.0, 260, 260);
+  const MoveReport reset = resized.moveTo(larger, false);
+  EXPECT_EQ(reset.obstacle_cells_kept, 0u);
+  for (std::uint32_t i = 0; i < larger.cellCount(); ++i)
+  {
+    ASSERT_EQ(resized.obstacleGrid().at(i), FREE_SPACE) << "Costmap2D::resizeMap leaves the layer empty";
+  }
+  EXPECT_TRUE(resized.shareableCells().empty());
+}
+
+TEST(MoveTo, MonitoringGoesOnAfterAMove)
+{
+  // A shared block that stays is never cleared; once it is really removed its cells are cleared, with the
+  // evidence rule, in the new grid's indexes.
+  SimWorld standing = walledWorld();
+  standing.box(6.0, 5.0, 6.4, 5.4);
+  const SimWorld removed = walledWorld();
+  SharingCore core = makeCore();
+  const GridGeometry old = core.geometry();
+  const std::vector<std::uint32_t> face = outline(old, 6.0, 5.0, 0.4);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", face, Subsection(5.8, 4.8, 6.6, 5.6)), 0.0).ok);
+  const GridGeometry moved(0.05, 3.0, 2.0, 150, 150);
+  core.moveTo(moved, true);
+  const std::size_t present = core.sharedCells("block").size();
+  ASSERT_EQ(present, face.size());
+
+  double t = 1.0;
+  for (int i = 0; i < 20; ++i, t += 0.2)
+  {
+    const ScanOutcome outcome = core.processScan(standing.scan(4.6, 5.2, 0.0), t);
+    for (const ObstacleUpdate& u : outcome.updates)
+    {
+      EXPECT_TRUE(u.cleared.empty()) << "a standing block lost cells after the move";
+      EXPECT_TRUE(u.geometry.sameAs(moved));
+    }
+  }
+  std::size_t cleared = 0;
+  for (int i = 0; i < 20; ++i, t += 0.2)
+  {
+    for (const ObstacleUpdate& u : core.processScan(removed.scan(4.6, 5.2, 0.0), t).updates)
+    {
+      cleared += u.cleared.size();
+    }
+  }
+  EXPECT_GT(cleared, 0u);
+  EXPECT_LT(core.sharedCells("block").size(), present / 2) << "the removed block was not cleared";
+}
+
+TEST(MoveTo, FleetRobotsStayExcludedWhereTheyStand)
+{
+  SharingCore core = makeCore();
+  FleetRobot robot;
+  robot.name = "robot_1";
+  robot.stamp = 0.0;
+  robot.footprint = { { 6.8, 6.8 }, { 7.2, 6.8 }, { 7.2, 7.2 }, { 6.8, 7.2 } };
+  core.fleetRobots().update(robot);
+  const GridGeometry moved(0.05, 2.5, 2.5, 200, 200);
+  core.moveTo(moved, true);
+  EXPECT_TRUE(core.fleetRobots().excludes(indexAt(moved, 7.0, 7.0)));
+  EXPECT_FALSE(core.fleetRobots().excludes(indexAt(moved, 5.0, 5.0)));
+}
+
+TEST(VersionedCellSetRemap, CellsLandingOnOneKeepTheNewestStampAndAClearWinsATie)
+{
+  VersionedCellSet cells;
+  cells.apply({ 0, 2 }, {}, 1, "robot_a");
+  cells.apply({}, { 1 }, 2, "robot_a");  // a newer clear next to cell 0
+  // Exact ties (same version and source), the mark first in one pair and the clear first in the other, so
+  // that whatever order remap() meets them in, one pair has the mark first.
+  cells.apply({ 3 }, {}, 5, "robot_b");
+  cells.apply({}, { 4 }, 5, "robot_b");
+  cells.apply({}, { 5 }, 6, "robot_b");
+  cells.apply({ 6 }, {}, 6, "robot_b");
+  // 0 and 1 land on 0, 3 and 4 on 1, 5 and 6 on 2; 2 is dropped.
+  const std::size_t dropped = cells.remap([](std::uint32_t index, std::uint32_t& moved) {
+    if (index == 2)
+    {
+      return false;
+    }
+    moved = index < 2 ? 0 : (index < 5 ? 1 : 2);
+    return true;
+  });
+  EXPECT_EQ(dropped, 1u);
+  EXPECT_FALSE(cells.isPresent(0)) << "the newer clear of cell 1 lost to the older mark of cell 0";
+  EXPECT_FALSE(cells.isPresent(1)) << "on an exact tie a clear wins, as in apply()";
+  EXPECT_FALSE(cells.isPresent(2)) << "on an exact tie a clear wins, as in apply()";
+  EXPECT_EQ(cells.presentCount(), 0u);
+  EXPECT_EQ(cells.trackedCount(), 3u);
+}
