@@ -36,8 +36,9 @@ BENCHMARKS = {
             "navigation host: C++ A* and inflation vs a Python/SciPy baseline"),
     "replay": ([sys.executable, os.path.join(ROOT, "sharing_replay", "scripts", "bench_replay")],
                "offline bag replay: real-time factor on a 10-minute two-robot bag"),
-    "fleet": ([sys.executable, os.path.join(ROOT, "tests", "scripts", "bench_fleet")],
-              "fleet benefit: N robots through the facility, sharing on vs off"),
+    "fleet": ([sys.executable, os.path.join(ROOT, "tests", "scripts", "bench_fleet"),
+               "--chart", os.path.join(OUT, "fleet.png")],
+              "fleet benefit: N robots through the facility, sharing on vs off (chart in out/bench/fleet.png)"),
 }
 
 

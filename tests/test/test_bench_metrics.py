@@ -228,3 +228,32 @@ def test_thesis_nav_params_are_printed_as_non_defaults():
     assert lines[0].startswith("nav_params: " + path)
     assert "move_base stuck_feedback_on_local_failure: True (default False)" in lines
     assert "move_base stuck_feedback_on_local_failure: True (default False)" not in bf.non_defaults()
+
+
+def bench_row(n, sharing, seed, times):
+    return (n, sharing, seed, {"time_to_goal": dict(("robot_%d" % i, t) for i, t in enumerate(times)),
+                               "time_mean": sum(times) / len(times)})
+
+
+def test_chart_draws_each_complete_n_with_bars_as_tall_as_the_times(tmp_path):
+    bf = load_bench_fleet()
+    rows = [bench_row(2, True, 1, [50.0, 60.0]), bench_row(2, False, 1, [70.0, 70.0]),
+            bench_row(2, True, 2, [54.0, 56.0]), bench_row(2, False, 2, [68.0, 72.0]),
+            bench_row(5, True, 1, [40.0] * 5), (5, False, 1, None),      # a run that gave no result
+            bench_row(10, True, 3, [45.0] * 10)]                         # no sharing-off run
+    path = str(tmp_path / "chart.png")
+    drawn = bf.chart(rows, path, "test")
+    assert set(drawn) == {(2, True), (2, False)}, "only N with a seed that has both runs is drawn"
+    (_x0, top_on, _x1, bottom), (_a, top_off, _b, _c) = drawn[(2, True)], drawn[(2, False)]
+    assert (bottom - top_on) / (bottom - top_off) == pytest.approx(55.0 / 70.0, rel=0.02)
+    from PIL import Image
+    with Image.open(path) as img:
+        assert img.size[0] > 0 and img.getpixel((int(_x0) + 2, int(bottom) - 2)) != (255, 255, 255)
+
+
+def test_chart_refuses_rows_without_a_complete_seed(tmp_path):
+    bf = load_bench_fleet()
+    with pytest.raises(ValueError, match="no N with a seed"):
+        bf.chart([bench_row(2, True, 1, [50.0]), (2, False, 1, None)], str(tmp_path / "c.png"), "test")
+    assert bf.draw_chart([(2, True, 1, None)], str(tmp_path / "c.png"), bf.make_parser().parse_args([])) == 1
+    assert not (tmp_path / "c.png").exists()
