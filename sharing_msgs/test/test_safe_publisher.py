@@ -4,10 +4,8 @@ publisher sending garbage, so nothing arrived any more)."""
 import json
 import logging
 import os
-import socket
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -81,37 +79,6 @@ def test_report_warns_on_new_drops_and_errors_while_every_delivery_fails():
     assert safe.report()[0] == ERROR  # still failing: still an error
     safe.publish(FakeMsg("good"))
     assert safe.report()[0] == OK
-
-
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.fixture
-def ros_env():
-    try:
-        import rospy  # noqa: F401
-        from sharing_msgs.msg import SharedObstacle  # noqa: F401
-    except ImportError as err:
-        pytest.skip("ROS workspace not built or not sourced (%s)" % err)
-    port = _free_port()
-    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1",
-               ROS_HOSTNAME="127.0.0.1")
-    master = subprocess.Popen(["rosmaster", "--core", "-p", str(port)], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            break
-        except OSError:
-            assert time.monotonic() < deadline, "rosmaster did not start"
-            time.sleep(0.05)
-    yield env
-    master.terminate()
-    master.wait(10)
 
 
 def _probe(env, *args):

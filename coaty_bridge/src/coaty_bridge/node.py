@@ -15,7 +15,7 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point32, PolygonStamped
 from sharing_msgs.msg import RobotFootprint, RobotFootprintArray, SharedObstacle, SharedObstacleArray
-from sharing_msgs import safe_publisher
+from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
@@ -377,6 +377,7 @@ def main():
         rospy.logfatal("coaty_bridge: bad parameter: %s", err)
         sys.exit(2)
     node = BridgeNode(config, footprint_config)
+    publisher_links.start_watch(rospy.get_name())
     rospy.on_shutdown(node.shutdown)
     node.start(float(subscriber_wait))
     rospy.spin()

@@ -26,6 +26,7 @@ from geometry_msgs.msg import Point32, PolygonStamped, PoseStamped, Twist
 from move_base_msgs.msg import MoveBaseAction, MoveBaseFeedback, MoveBaseResult, RecoveryStatus
 from nav_msgs.msg import OccupancyGrid, Path
 from sharing_msgs.msg import RobotFootprintArray, SharedObstacle
+from sharing_msgs import publisher_links
 from std_msgs.msg import Empty, String
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -86,7 +87,7 @@ class NavNode:
     def __init__(self):
         self.robot = rospy.get_namespace().strip("/") or "robot"
         handler = _RosoutHandler(self.robot)
-        for name in ("fleet_nav",):
+        for name in ("fleet_nav", "sharing_msgs"):  # sharing_msgs: the publisher link watch
             logging.getLogger(name).addHandler(handler)
             logging.getLogger(name).setLevel(logging.INFO)
         self.params, unused = NavParams.from_dict(rospy.get_param("~", {}), self.robot)
@@ -554,6 +555,7 @@ def main():
     except (ParameterError, ValueError) as err:
         rospy.logfatal("fleet_nav (%s) cannot start: bad parameter: %s", rospy.get_namespace().strip("/"), err)
         raise SystemExit(1)
+    publisher_links.start_watch(rospy.get_name())
     if not node.wait_for_map():
         return
     node.start()

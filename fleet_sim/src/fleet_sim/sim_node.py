@@ -33,6 +33,7 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
+from sharing_msgs import publisher_links
 
 from fleet_sim import frames
 from fleet_sim.errors import InvalidRequestError, SimError, WorldError
@@ -87,9 +88,10 @@ def _tf(stamp, parent, child, t, z=0.0):
 
 class SimNode:
     def __init__(self):
-        logger = logging.getLogger("fleet_sim")
-        logger.addHandler(_RosoutHandler())
-        logger.setLevel(logging.DEBUG)
+        for name in ("fleet_sim", "sharing_msgs"):  # sharing_msgs: the publisher link watch
+            logger = logging.getLogger(name)
+            logger.addHandler(_RosoutHandler())
+            logger.setLevel(logging.DEBUG)
         world_path = rospy.get_param("~world")
         world = load_world(world_path,
                            stage43_range_compat=bool(rospy.get_param("~stage43_range_compat", False)),
@@ -326,6 +328,7 @@ def main():
     except (WorldError, SimError, KeyError, ImportError) as err:
         rospy.logfatal("fleet_sim cannot start: %s", err)
         raise SystemExit(1)
+    publisher_links.start_watch(rospy.get_name())
     try:
         node.spin()
     except rospy.ROSInterruptException:

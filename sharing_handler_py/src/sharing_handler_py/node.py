@@ -11,7 +11,7 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
-from sharing_msgs import safe_publisher
+from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 from sharing_msgs.srv import AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse
 from std_msgs.msg import String
@@ -301,4 +301,5 @@ def main(argv=None):
         print(message, file=sys.stderr)
         sys.exit(2)
     HandlerNode(params)
+    publisher_links.start_watch(rospy.get_name())
     rospy.spin()
