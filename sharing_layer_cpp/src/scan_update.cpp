@@ -322,6 +322,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     const double map_end_x = g.endX();
     const double map_end_y = g.endY();
     SetCellAction clear{ costs, FREE_SPACE };
+    touch.touchPoint(ox, oy);
     for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
     {
       const Point3& p = observation.points[pi];
@@ -362,6 +363,12 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       if (!g.worldToMap(wx, wy, x1, y1))
       {
         continue;
+      }
+      {
+        // costmap_2d's updateRaytraceBounds (sqrt of squares: the same value as its hypot, at a fraction of it).
+        const double dx = wx - ox, dy = wy - oy;
+        const double scale = std::min(1.0, limits.raytrace_range / std::sqrt(dx * dx + dy * dy));
+        touch.touchPoint(ox + dx * scale, oy + dy * scale);
       }
       const LineSteps line = lineSteps(x0, y0, x1, y1, cell_raytrace_range);
       const int row = static_cast<int>(g.size_x);
@@ -450,6 +457,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     {
       costs[index] = LETHAL_OBSTACLE;
       touch.marked.push_back(index);
+      touch.touchPoint(p.x, p.y);
     }
   }
   // Which watched cells the beams passed, and how far before their endpoints. Only the beams pointing at a

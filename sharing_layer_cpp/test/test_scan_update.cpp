@@ -231,3 +231,44 @@ TEST(ScanUpdate, WatchedCellOutsideTheGridIsRefusedAndTheGridUntouched)
     ASSERT_EQ(NO_INFORMATION, grid.at(i));
   }
 }
+
+// The update box is costmap_2d ObstacleLayer's: origin, each clipped endpoint pulled in to raytrace_range, every
+// marked point; nothing else (issue 13: a fixed box of the range around the sensor made every later layer work
+// over 3.4 times the area at 30 m).
+TEST(ScanUpdate, TouchedBoxIsWhatTheBeamsReachedAndWhatWasMarked)
+{
+  CostGrid grid = smallGrid();
+  // Sensor at (0.05, 0.25). One beam to (1.05, 0.25), 1.0 m: cleared up to raytrace_range 0.6 m, beyond
+  // obstacle_range 0.4 m, so not marked. One to (0.25, 0.45): marked, and inside raytrace_range.
+  const ScanTouch touch =
+      applyScan(grid, scanFrom(0.05, 0.25, { { 1.05, 0.25, 0.0 }, { 0.25, 0.45, 0.0 } }), limits(0.4, 0.6));
+  ASSERT_FALSE(touch.touchedNothing());
+  EXPECT_DOUBLE_EQ(touch.min_x, 0.05);
+  EXPECT_DOUBLE_EQ(touch.max_x, 0.65);  // the long beam, pulled in to raytrace_range
+  EXPECT_DOUBLE_EQ(touch.min_y, 0.25);
+  EXPECT_DOUBLE_EQ(touch.max_y, 0.45);  // the marked point
+}
+
+TEST(ScanUpdate, TouchedBoxFollowsBeamsClippedAtTheMapEdge)
+{
+  CostGrid grid = smallGrid();  // 1.2 m x 0.5 m
+  // Leaves the map at the top: clipped to y = 0.5 - 0.001 as costmap_2d clips, well within raytrace_range.
+  const ScanTouch touch = applyScan(grid, scanFrom(0.05, 0.25, { { 0.55, 1.25, 0.0 } }), limits(2.5, 3.0));
+  EXPECT_NEAR(touch.max_y, 0.499, 1e-9);
+  EXPECT_NEAR(touch.max_x, 0.05 + 0.5 * (0.5 - 0.25) / 1.0, 1e-9);  // x where the beam crosses the edge
+  EXPECT_DOUBLE_EQ(touch.min_x, 0.05);
+  EXPECT_DOUBLE_EQ(touch.min_y, 0.25);
+}
+
+TEST(ScanUpdate, TouchedBoxWithTheOriginOffTheMapHoldsOnlyMarkedPoints)
+{
+  CostGrid grid = smallGrid();
+  const ScanTouch touch = applyScan(grid, scanFrom(-0.5, 0.25, { { 0.15, 0.25, 0.0 }, { 0.35, 0.15, 0.0 } }),
+                                    limits(2.5, 3.0));
+  EXPECT_FALSE(touch.origin_in_map);
+  EXPECT_DOUBLE_EQ(touch.min_x, 0.15);
+  EXPECT_DOUBLE_EQ(touch.max_x, 0.35);
+  EXPECT_DOUBLE_EQ(touch.min_y, 0.15);
+  EXPECT_DOUBLE_EQ(touch.max_y, 0.25);
+  EXPECT_TRUE(applyScan(grid, scanFrom(-0.5, 0.25, {}), limits(2.5, 3.0)).touchedNothing());
+}

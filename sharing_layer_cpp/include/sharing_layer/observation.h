@@ -51,6 +51,22 @@ struct CellRect
 struct ScanTouch
 {
   bool origin_in_map = true;            ///< false: nothing was cleared (costmap_2d skips raytracing then)
+  /// World box of what the scan touched, exactly as costmap_2d's ObstacleLayer grows its update bounds: the
+  /// sensor origin and each beam's (map-clipped) endpoint pulled in to raytrace_range when clearing ran, and
+  /// every marked point. A layer reports this box, not a fixed range around the sensor: later layers (inflation
+  /// above all) and the master merge work over it. Empty (min > max) when the scan touched nothing.
+  double min_x = 1e300;
+  double min_y = 1e300;
+  double max_x = -1e300;
+  double max_y = -1e300;
+  bool touchedNothing() const { return max_x < min_x || max_y < min_y; }
+  void touchPoint(double x, double y)
+  {
+    min_x = x < min_x ? x : min_x;
+    min_y = y < min_y ? y : min_y;
+    max_x = x > max_x ? x : max_x;
+    max_y = y > max_y ? y : max_y;
+  }
   std::size_t rejected_points = 0;      ///< non-finite points, ignored
   std::size_t height_filtered = 0;      ///< points outside the height limits, ignored
   std::vector<std::uint32_t> marked;    ///< cells set lethal by this scan, sorted, unique
