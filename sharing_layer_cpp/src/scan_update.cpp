@@ -317,7 +317,8 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   touch.origin_in_map = std::isfinite(observation.origin.z) && g.worldToMap(ox, oy, x0, y0);
   const unsigned int cell_raytrace_range = g.cellDistance(limits.raytrace_range);
   BeamIndex beams(watching ? observation.points.size() : 0, x0, y0, cell_raytrace_range);
-  if (touch.origin_in_map)
+  const bool clearing = touch.origin_in_map && limits.clearing;
+  if (clearing)
   {
     const double map_end_x = g.endX();
     const double map_end_y = g.endY();
@@ -436,7 +437,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       continue;  // counted in the clearing pass, or below when it did not run
     }
     const double sq_dist = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + (p.z - oz) * (p.z - oz);
-    const bool in_range = sq_dist < sq_obstacle_range;
+    const bool in_range = limits.marking && sq_dist < sq_obstacle_range;
     const double sq_planar = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy);
     if (!in_range && !(watching && sq_planar <= sq_hit_range))
     {
@@ -573,7 +574,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     std::for_each(watch.loose_cells.begin(), watch.loose_cells.end(), walk_cell);
   }
 
-  if (!touch.origin_in_map)
+  if (!clearing)  // the clearing pass counts the points it could not use; without it, count them here
   {
     for (const Point3& p : observation.points)
     {

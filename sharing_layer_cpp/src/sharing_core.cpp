@@ -219,12 +219,13 @@ void SharingCore::countRectangle(const CellRect& rect, int delta)
   }
 }
 
-ScanOutcome SharingCore::processScan(const Observation& observation, double now_s)
+ScanOutcome SharingCore::processScan(const Observation& observation, double now_s, const ScanLimits& limits)
 {
+  limits.validate();
   const GridGeometry& g = geometry();
   const double ox = observation.origin.x;
   const double oy = observation.origin.y;
-  const double view_radius = std::max(params_.limits.obstacle_range, params_.limits.raytrace_range);
+  const double view_radius = std::max(limits.obstacle_range, limits.raytrace_range);
   const bool origin_finite = std::isfinite(ox) && std::isfinite(oy);
   fleet_robots_.expire(now_s);
 
@@ -297,11 +298,11 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   // on (see checkPlan).
   std::vector<std::uint32_t> not_lethal_before;
   last_far_hits_.clear();
-  if (!plan_.empty())
+  if (!plan_.empty() && limits.marking)  // a source that does not mark makes nothing new
   {
-    const double sq_range = params_.limits.obstacle_range * params_.limits.obstacle_range;
-    const double sq_far = params_.limits.raytrace_range * params_.limits.raytrace_range;
-    const ScanLimits& l = params_.limits;
+    const double sq_range = limits.obstacle_range * limits.obstacle_range;
+    const double sq_far = limits.raytrace_range * limits.raytrace_range;
+    const ScanLimits& l = limits;
     for (const Point3& p : observation.points)
     {
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < l.min_obstacle_height ||
@@ -329,8 +330,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   }
 
   ScanOutcome outcome;
-  outcome.touch = applyScan(obstacles_, observation, params_.limits, watch);
-  trackShareable(outcome.touch, observation);
+  outcome.touch = applyScan(obstacles_, observation, limits, watch);
+  trackShareable(outcome.touch, observation, limits.obstacle_range);
   // Signs of occupancy among the watched cells: marked, an endpoint in it beyond obstacle_range, or cleared
   // by a beam that ended close behind it (the face it hit, or a neighbour it grazed).
   std::vector<std::uint32_t> occupied;
@@ -537,7 +538,7 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   }
 }
 
-void SharingCore::trackShareable(const ScanTouch& touch, const Observation& observation)
+void SharingCore::trackShareable(const ScanTouch& touch, const Observation& observation, double obstacle_range)
 {
   for (std::uint32_t index : touch.marked)
   {
@@ -553,7 +554,7 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
   const GridGeometry& g = geometry();
   const double ox = observation.origin.x;
   const double oy = observation.origin.y;
-  const double range_sq = params_.limits.obstacle_range * params_.limits.obstacle_range;
+  const double range_sq = obstacle_range * obstacle_range;
   const bool origin_finite = std::isfinite(ox) && std::isfinite(oy);
   const std::uint8_t* costs = obstacles_.data();
   auto keep_end = std::remove_if(shareable_.begin(), shareable_.end(), [&](std::uint32_t index) {

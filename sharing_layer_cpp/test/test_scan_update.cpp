@@ -272,3 +272,34 @@ TEST(ScanUpdate, TouchedBoxWithTheOriginOffTheMapHoldsOnlyMarkedPoints)
   EXPECT_DOUBLE_EQ(touch.max_y, 0.25);
   EXPECT_TRUE(applyScan(grid, scanFrom(-0.5, 0.25, {}), limits(2.5, 3.0)).touchedNothing());
 }
+
+// costmap_2d's per-source marking / clearing flags (issue 13).
+TEST(ScanUpdate, AMarkingOnlySourceMarksWithoutClearing)
+{
+  CostGrid grid = smallGrid(LETHAL_OBSTACLE);
+  ScanLimits marking_only = limits(2.5, 3.0);
+  marking_only.clearing = false;
+  const ScanTouch touch = applyScan(grid, scanFrom(0.05, 0.25, { { 0.85, 0.25, 0.0 } }), marking_only);
+  EXPECT_EQ(cellsWithCost(grid, LETHAL_OBSTACLE).size(), 60u);  // nothing cleared
+  EXPECT_EQ(touch.marked, std::vector<std::uint32_t>{ 2 * 12 + 8 });
+  EXPECT_DOUBLE_EQ(touch.min_x, 0.85);  // the box holds the marked point only: no beam was raytraced
+  EXPECT_DOUBLE_EQ(touch.max_x, 0.85);
+}
+
+TEST(ScanUpdate, AClearingOnlySourceClearsWithoutMarkingButItsEndpointsStillCount)
+{
+  CostGrid grid = smallGrid(LETHAL_OBSTACLE);
+  ScanLimits clearing_only = limits(2.5, 3.0);
+  clearing_only.marking = false;
+  ScanWatch watch;
+  watch.cells = { 2 * 12 + 8 };  // the endpoint's cell, watched (a shared cell)
+  const ScanTouch touch = applyScan(grid, scanFrom(0.05, 0.25, { { 0.85, 0.25, 0.0 } }), clearing_only, watch);
+  EXPECT_TRUE(touch.marked.empty());
+  // costmap_2d's raytrace clears the endpoint's cell too; a marking source marks it again, this one does not.
+  for (unsigned int x = 0; x <= 8; ++x)
+  {
+    EXPECT_EQ(FREE_SPACE, grid.at(2 * 12 + x)) << "cell " << x << " of the beam";
+  }
+  EXPECT_EQ(touch.watched_hit, std::vector<std::uint32_t>{ 2 * 12 + 8 });  // evidence the cell is occupied
+  EXPECT_TRUE(touch.watched_free.empty());
+}

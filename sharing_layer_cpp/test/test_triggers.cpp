@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <string>
 
 #include "sharing_layer/cost_values.h"
@@ -377,4 +378,43 @@ TEST(PlanTrigger, AlreadySharedCellsOnThePlanAreReportedNotProposed)
   EXPECT_EQ(TriggerReason::AlreadyShared, report.reason) << report.message;
   EXPECT_TRUE(report.proposals.empty());
   EXPECT_TRUE(report.log);
+}
+
+// --- observation sources with their own limits (issue 13) ------------------------------------------------
+
+TEST(ObservationSources, AClearingOnlySourceNeitherMarksNorFiresThePlanTrigger)
+{
+  SimWorld world = walledWorld();
+  world.box(5.02, 4.6, 5.32, 5.4);  // 1.5 m ahead on the plan
+  SharingCore core = makeCore();
+  core.setPlan(line(1.0, 5.0, 9.0, 5.0));
+  ScanLimits clearing_only = defaults().limits;
+  clearing_only.marking = false;
+  const ScanOutcome outcome = core.processScan(world.scan(3.5, 5.0, 0.0), 1.0, clearing_only);
+  EXPECT_TRUE(outcome.touch.marked.empty());
+  EXPECT_EQ(TriggerReason::None, core.checkPlan(3.5, 5.0, 1.0).reason);
+  // The same scan from a source that marks: fires (the scene is one that can).
+  core.processScan(world.scan(3.5, 5.0, 0.0), 1.1);
+  EXPECT_EQ(TriggerReason::Proposed, core.checkPlan(3.5, 5.0, 1.1).reason);
+}
+
+TEST(ObservationSources, ASourceWithItsOwnObstacleRangeMarksFartherThanTheLayers)
+{
+  SimWorld world = walledWorld();
+  world.box(7.02, 4.6, 7.32, 5.4);  // 3.5 m from the robot: beyond the layer's obstacle_range 2.5
+  SharingCore core = makeCore();
+  const GridGeometry g = grid();
+  unsigned int mx = 0, my = 0;
+  ASSERT_TRUE(g.worldToMap(7.03, 5.0, mx, my));  // the block's face, where the beam ends
+  core.processScan(world.scan(3.5, 5.0, 0.0), 1.0);
+  EXPECT_NE(LETHAL_OBSTACLE, core.obstacleGrid().getCost(mx, my));
+  ScanLimits long_range = defaults().limits;
+  long_range.obstacle_range = 4.0;
+  long_range.raytrace_range = 4.5;
+  const ScanOutcome outcome = core.processScan(world.scan(3.5, 5.0, 0.0), 2.0, long_range);
+  EXPECT_EQ(LETHAL_OBSTACLE, core.obstacleGrid().getCost(mx, my));
+  EXPECT_GE(outcome.touch.max_x, 7.0);
+  ScanLimits bad = long_range;
+  bad.obstacle_range = -1.0;
+  EXPECT_THROW(core.processScan(world.scan(3.5, 5.0, 0.0), 3.0, bad), std::invalid_argument);
 }

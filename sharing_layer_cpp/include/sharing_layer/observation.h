@@ -29,6 +29,10 @@ struct ScanLimits
   double raytrace_range = 3.0;        ///< cells closer than this on a beam are cleared (m)
   double min_obstacle_height = 0.0;   ///< points below are ignored for marking and clearing (m)
   double max_obstacle_height = 2.0;   ///< points above are ignored for marking and clearing (m)
+  /// costmap_2d's per-source `marking` and `clearing`: a source may only mark (no raytracing) or only clear
+  /// (its endpoints are not marked, though one in a watched cell is still evidence that the cell is occupied).
+  bool marking = true;
+  bool clearing = true;
 
   /// @throws std::invalid_argument naming the field when a range is negative or not finite,
   ///         or min_obstacle_height > max_obstacle_height

@@ -181,7 +181,11 @@ public:
    * itself is cleared and marked with costmap_2d's rules. Shareable cells touching a shared obstacle in view
    * join it (growInto); present cells seen occupied again renew it every lease_renewal_interval.
    */
-  ScanOutcome processScan(const Observation& observation, double now_s);
+  ScanOutcome processScan(const Observation& observation, double now_s) { return processScan(observation, now_s, params_.limits); }
+  /// @brief The same with one observation source's own limits (costmap_2d's per-source obstacle_range,
+  /// raytrace_range, heights, marking and clearing) instead of the layer's.
+  /// @throws std::invalid_argument naming the field when `limits` is invalid
+  ScanOutcome processScan(const Observation& observation, double now_s, const ScanLimits& limits);
 
   /// @brief A "cannot get past" signal; @return true when it starts a burst (then call propose)
   bool signalStuck(double now_s) { return trigger_.signal(now_s); }
@@ -280,7 +284,7 @@ public:
   std::vector<std::uint32_t> sharedCells(const std::string& uuid) const;
 
 private:
-  void trackShareable(const ScanTouch& touch, const Observation& observation);
+  void trackShareable(const ScanTouch& touch, const Observation& observation, double obstacle_range);
   void rebuildStaticFilter();
   void dropStaticCandidates();
   void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, const Observation& observation,
