@@ -1251,6 +1251,51 @@ bool SharingCore::expire(const std::string& uuid)
   return true;
 }
 
+ObstacleUpdate reprojectUpdate(const ObstacleUpdate& update, const GridGeometry& to, std::size_t* dropped)
+{
+  ObstacleUpdate out = update;
+  out.geometry = to;
+  out.marked.clear();
+  out.cleared.clear();
+  std::size_t off_grid = 0;
+  const auto move = [&](const std::vector<std::uint32_t>& from, std::vector<std::uint32_t>& into) {
+    into.reserve(from.size());
+    for (std::uint32_t index : from)
+    {
+      if (!update.geometry.containsIndex(index))
+      {
+        throw std::invalid_argument("obstacle " + update.uuid + " from " + update.source + ": cell " +
+                                    std::to_string(index) + " outside its grid " + update.geometry.describe());
+      }
+      unsigned int mx = 0, my = 0, tx = 0, ty = 0;
+      update.geometry.indexToCells(index, mx, my);
+      double wx = 0.0, wy = 0.0;
+      update.geometry.mapToWorld(mx, my, wx, wy);
+      if (to.worldToMap(wx, wy, tx, ty))
+      {
+        into.push_back(to.getIndex(tx, ty));
+      }
+      else
+      {
+        ++off_grid;
+      }
+    }
+    std::sort(into.begin(), into.end());
+    into.erase(std::unique(into.begin(), into.end()), into.end());
+  };
+  move(update.marked, out.marked);
+  move(update.cleared, out.cleared);
+  std::vector<std::uint32_t> cleared_only;
+  std::set_difference(out.cleared.begin(), out.cleared.end(), out.marked.begin(), out.marked.end(),
+                      std::back_inserter(cleared_only));
+  out.cleared.swap(cleared_only);
+  if (dropped != nullptr)
+  {
+    *dropped = off_grid;
+  }
+  return out;
+}
+
 MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observations)
 {
   const GridGeometry old = this->geometry();

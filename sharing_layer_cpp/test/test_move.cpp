@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <set>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -229,4 +230,76 @@ TEST(VersionedCellSetRemap, CellsLandingOnOneKeepTheNewestStampAndAClearWinsATie
   EXPECT_FALSE(cells.isPresent(2)) << "on an exact tie a clear wins, as in apply()";
   EXPECT_EQ(cells.presentCount(), 0u);
   EXPECT_EQ(cells.trackedCount(), 3u);
+}
+
+// A shared obstacle sent on another robot's grid reaches a layer whose grid differs (a rolling window, a map of
+// another size or origin) at the same place in the world.
+namespace
+{
+/// Cell centres in millimetres: grids with different origins put the same centre at 2.1749999 and 2.1750001.
+std::set<WorldCell> worldMm(const GridGeometry& g, const std::vector<std::uint32_t>& cells)
+{
+  std::set<WorldCell> out;
+  for (std::uint32_t index : cells)
+  {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(mx, my, wx, wy);
+    out.emplace(std::lround(wx * 1000.0), std::lround(wy * 1000.0));
+  }
+  return out;
+}
+}  // namespace
+
+TEST(Reproject, AnUpdateFromAnotherGridKeepsItsCellsInTheWorldAndDropsWhatFallsOff)
+{
+  const GridGeometry sender(0.05, 0.0, 0.0, 200, 200);
+  const GridGeometry window(0.05, 2.0, 2.0, 60, 60);  // 3 m x 3 m from (2, 2)
+  ObstacleUpdate u;
+  u.uuid = "u1";
+  u.source = "robot_1";
+  u.geometry = sender;
+  u.version = 3;
+  u.deadline = 60;
+  u.rectangle = Subsection(1.8, 2.9, 3.4, 3.3);
+  u.marked = outline(sender, 1.8, 2.9, 0.4);      // straddles the window's lower-left edge
+  u.cleared = outline(sender, 3.0, 3.0, 0.2);
+  std::size_t dropped = 0;
+  const ObstacleUpdate moved = reprojectUpdate(u, window, &dropped);
+  EXPECT_TRUE(moved.geometry.sameAs(window));
+  EXPECT_EQ(u.uuid, moved.uuid);
+  EXPECT_EQ(u.version, moved.version);
+  std::set<WorldCell> expected_marked;
+  for (const WorldCell& c : worldMm(sender, u.marked))
+  {
+    expected_marked.insert(c);
+  }
+  std::set<WorldCell> kept = worldMm(window, moved.marked);
+  std::size_t off = 0;
+  for (const WorldCell& c : expected_marked)
+  {
+    if (c.first < 2000 || c.second < 2000)
+    {
+      ++off;
+      EXPECT_EQ(0u, kept.count(c));
+    }
+    else
+    {
+      EXPECT_EQ(1u, kept.count(c)) << c.first << ", " << c.second;
+    }
+  }
+  EXPECT_GT(off, 0u);
+  EXPECT_EQ(off, dropped);
+  EXPECT_EQ(worldMm(sender, u.cleared), worldMm(window, moved.cleared));
+  // A coarser grid: cells merge; a cell both marked and cleared there stays marked.
+  ObstacleUpdate both = u;
+  both.cleared = u.marked;
+  const ObstacleUpdate coarse = reprojectUpdate(both, GridGeometry(0.1, 0.0, 0.0, 100, 100));
+  EXPECT_FALSE(coarse.marked.empty());
+  EXPECT_TRUE(coarse.cleared.empty());
+  // An index outside the sender's own grid is refused, naming the obstacle.
+  ObstacleUpdate bad = u;
+  bad.marked.push_back(sender.cellCount());
+  EXPECT_THROW(reprojectUpdate(bad, window), std::invalid_argument);
 }

@@ -127,6 +127,15 @@ struct ApplyResult
   std::string error;           ///< why not, when !ok
 };
 
+/**
+ * @brief The same update on another grid, for a layer whose grid is not the sender's (a rolling window, a map of
+ * another size or origin): each cell goes to the cell of `to` holding its centre, a marked cell winning over a
+ * cleared one that lands on the same cell; cells off `to` are dropped and counted in `dropped`. Everything else
+ * (uuid, rectangle in world coordinates, version, deadline, source, stamp) is kept.
+ * @throws std::invalid_argument naming the obstacle when an index lies outside the update's own grid
+ */
+ObstacleUpdate reprojectUpdate(const ObstacleUpdate& update, const GridGeometry& to, std::size_t* dropped = nullptr);
+
 /// @brief What moving the layer onto another grid (SharingCore::moveTo) kept and dropped.
 struct MoveReport
 {
