@@ -9,7 +9,7 @@ What counts as use, per package folder:
   - launch and rostest files: `$(find X)` and `pkg="X"`;
   - Python strings that start a ROS tool on a package: "roslaunch", "X" / "rosrun", "X";
   - .msg/.srv/.action files: field types `X/Type`.
-A use in test/ may be declared as test_depend; a use in C++ or CMake needs a build dependency;
+A use in a test/ folder (test/..., plugin/test/...) may be declared as test_depend; a use in C++ or CMake needs a build dependency;
 any other use needs an exec dependency (`depend` covers all three).
 
 Rules:
@@ -181,7 +181,7 @@ class Checker:
     def scan(self, package):
         for path, rel in package_files(self.root, package):
             name = os.path.basename(path)
-            in_test = rel.split(os.sep)[0] == "test"
+            in_test = "test" in rel.split(os.sep)[:-1]  # test/..., or a part's own tests (plugin/test/...)
             where = os.path.join(package.folder, rel)
             if name == "package.xml" or name == "setup.py":
                 continue

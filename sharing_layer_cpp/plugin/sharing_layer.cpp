@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <sstream>
+#include <utility>
 
 #include <geometry_msgs/TransformStamped.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -134,6 +136,14 @@ void SharingLayer::onInitialize()
     ROS_ERROR("SharingLayer %s: no observation source (set %s/observation_sources): this layer marks nothing and "
               "shares nothing",
               name_.c_str(), private_nh.getNamespace().c_str());
+  }
+  if (layered_costmap_->isRolling())
+  {
+    ROS_WARN("SharingLayer %s: in a rolling-window costmap it works as costmap_2d::ObstacleLayer and draws the "
+             "fleet's obstacles (placed by world position; its global_frame must be the fleet's, e.g. map), but "
+             "proposes and sends nothing of its own (no a-priori map there tells walls from new obstacles, and its "
+             "cell indexes move with the robot); put it in the global costmap to share",
+             name_.c_str());
   }
   ros::NodeHandle robot_nh;
   global_frame_ = layered_costmap_->getGlobalFrameID();
@@ -272,7 +282,58 @@ void SharingLayer::rebuildCore()
 void SharingLayer::matchSize()
 {
   ObstacleLayer::matchSize();
+  {
+    std::lock_guard<std::mutex> lock(core_mutex_);
+    const costmap_2d::Costmap2D* master = layered_costmap_->getCostmap();
+    if (core_ && master->getSizeInCellsX() > 0 && master->getSizeInCellsY() > 0)
+    {
+      // A new map (size, resolution or origin): shared obstacles stay where they are in the world. The layer's
+      // own grid starts empty, as ObstacleLayer's does after resizeMap.
+      const GridGeometry geometry = masterGeometry();
+      const MoveReport report = core_->moveTo(geometry, false);
+      ROS_INFO("SharingLayer (%s): grid now %s; %zu shared obstacle(s) kept by world position, %zu of their "
+               "cells off the new grid dropped (%zu obstacle(s) left with none)",
+               params_.robot_name.c_str(), geometry.describe().c_str(), core_->sharedObstacles().size(),
+               report.shared_cells_dropped, report.obstacles_out_of_grid);
+      applyUnknownMap();
+      static_pending_ = true;  // the static layer draws the new map into the master in the next updateCosts()
+      pre_static_scans_.clear();
+      return;
+    }
+  }
   rebuildCore();
+}
+
+void SharingLayer::followRollingWindow(double robot_x, double robot_y)
+{
+  // ObstacleLayer's rolling window: the layer's grid is centred on the robot (LayeredCostmap has moved the
+  // master the same way), and the core's grid follows it. What the sensors marked and the shared obstacles stay
+  // where they are in the world; what falls off is dropped, as Costmap2D::updateOrigin drops it.
+  updateOrigin(robot_x - getSizeInMetersX() / 2, robot_y - getSizeInMetersY() / 2);
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  if (!core_)
+  {
+    return;
+  }
+  const GridGeometry geometry = masterGeometry();
+  const GridGeometry& current = core_->geometry();
+  if (geometry.origin_x == current.origin_x && geometry.origin_y == current.origin_y &&
+      geometry.size_x == current.size_x && geometry.size_y == current.size_y)
+  {
+    return;
+  }
+  const MoveReport report = core_->moveTo(geometry, true);
+  if (report.shared_cells_dropped > 0)
+  {
+    ROS_INFO_THROTTLE(10.0, "SharingLayer (%s): the rolling window left %zu cell(s) of shared obstacles behind "
+                            "(%zu obstacle(s) now wholly outside it)",
+                      params_.robot_name.c_str(), report.shared_cells_dropped, report.obstacles_out_of_grid);
+  }
+  // A rolling window has no a-priori map to tell walls from new obstacles: the layer keeps ObstacleLayer's
+  // behaviour and the fleet's obstacles, and proposes nothing of its own (static_pending_ blocks the plan
+  // trigger; onInitialize says so).
+  static_pending_ = true;
+  pre_static_scans_.clear();
 }
 
 void SharingLayer::onFootprintChanged()
@@ -526,7 +587,20 @@ void SharingLayer::sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& 
   }
   try
   {
-    const ApplyResult result = core_->applyShared(fromMessage(*msg), ros::Time::now().toSec());
+    ObstacleUpdate update = fromMessage(*msg);
+    if (!update.geometry.sameAs(core_->geometry()))
+    {
+      // Sent on another grid (the sender's map differs in size or origin, or this is a rolling window): the
+      // cells go where they are in the world.
+      std::size_t dropped = 0;
+      update = reprojectUpdate(update, core_->geometry(), &dropped);
+      if (dropped > 0)
+      {
+        ROS_DEBUG("SharingLayer (%s): obstacle %s from %s: %zu cell(s) outside this layer's grid dropped",
+                  params_.robot_name.c_str(), msg->uuid.c_str(), msg->source.c_str(), dropped);
+      }
+    }
+    const ApplyResult result = core_->applyShared(update, ros::Time::now().toSec());
     if (!result.ok)
     {
       ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): ignoring shared obstacle: %s", params_.robot_name.c_str(),
@@ -552,14 +626,17 @@ void SharingLayer::expiredCallback(const std_msgs::String::ConstPtr& msg)
 void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw, double* min_x, double* min_y,
                                 double* max_x, double* max_y)
 {
+  if (rolling_window_)
+  {
+    followRollingWindow(robot_x, robot_y);
+  }
   if (!enabled_)
   {
     return;
   }
   useExtraBounds(min_x, min_y, max_x, max_y);
-  std::vector<costmap_2d::Observation> observations;
-  const bool current = getMarkingObservations(observations);
-  current_ = current;
+  std::vector<std::pair<costmap_2d::Observation, ScanLimits>> observations;
+  current_ = sourceObservations(observations);
 
   std::lock_guard<std::mutex> lock(core_mutex_);
   if (!core_)
@@ -567,40 +644,56 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     return;
   }
   const double now = ros::Time::now().toSec();
-  for (const costmap_2d::Observation& observation : observations)
+  for (const auto& source_observation : observations)
   {
+    const costmap_2d::Observation& observation = source_observation.first;
+    const ScanLimits& limits = source_observation.second;
     Observation scan = toObservation(observation);
-    const ScanOutcome outcome = core_->processScan(scan, now);
+    const ScanOutcome outcome = core_->processScan(scan, now, limits);
     if (static_pending_)
     {
       if (pre_static_scans_.size() == kMaxPreStaticScans)
       {
         pre_static_scans_.pop_front();
       }
-      pre_static_scans_.push_back(std::move(scan));
+      pre_static_scans_.emplace_back(std::move(scan), limits);
     }
     if (!outcome.touch.origin_in_map)
     {
       ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): sensor origin (%.2f, %.2f) is off the map; not clearing",
                         params_.robot_name.c_str(), observation.origin_.x, observation.origin_.y);
     }
-    for (const ObstacleUpdate& update : outcome.updates)
+    if (!rolling_window_)  // its cell indexes would be those of a grid that moves with the robot
     {
-      updates_pub_.publish(toMessage(update, global_frame_));
+      for (const ObstacleUpdate& update : outcome.updates)
+      {
+        updates_pub_.publish(toMessage(update, global_frame_));
+      }
     }
-    if (!static_pending_)  // before the static map every wall looks new
+    if (!static_pending_ && !rolling_window_)  // without the a-priori map every wall looks new
     {
       handleTrigger(core_->checkPlan(robot_x, robot_y, now), now);
     }
-    // Marking reaches obstacle_range, clearing raytrace_range around the sensor.
-    const double reach = std::max(params_.limits.obstacle_range, params_.limits.raytrace_range);
-    touch(observation.origin_.x - reach, observation.origin_.y - reach, min_x, min_y, max_x, max_y);
-    touch(observation.origin_.x + reach, observation.origin_.y + reach, min_x, min_y, max_x, max_y);
+    // What the scan touched, as ObstacleLayer grows its bounds (the origin, the beams up to raytrace_range,
+    // the marked points), not a box of the range around the sensor: every later layer works over this.
+    if (!outcome.touch.touchedNothing())
+    {
+      touch(outcome.touch.min_x, outcome.touch.min_y, min_x, min_y, max_x, max_y);
+      touch(outcome.touch.max_x, outcome.touch.max_y, min_x, min_y, max_x, max_y);
+    }
   }
   if (stuck_pending_)
   {
     stuck_pending_ = false;
-    handleTrigger(core_->trigger(stuck_source_, stuck_stamp_.toSec(), robot_x, robot_y), now);
+    if (rolling_window_)
+    {
+      ROS_INFO("SharingLayer (%s): %s ignored: a rolling-window costmap proposes nothing of its own",
+               params_.robot_name.c_str(), triggerSourceName(stuck_source_));
+    }
+    else
+    {
+      handleTrigger(core_->trigger(stuck_source_, stuck_stamp_.toSec(), robot_x, robot_y), now);
+    }
   }
   // Only obstacles that changed grow the bounds; the others are drawn directly in updateCosts.
   const WorldBounds dirty = core_->takeDirtyBounds();
@@ -610,6 +703,59 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     touch(dirty.max_x, dirty.max_y, min_x, min_y, max_x, max_y);
   }
   updateFootprint(robot_x, robot_y, robot_yaw, min_x, min_y, max_x, max_y);
+}
+
+bool SharingLayer::sourceObservations(std::vector<std::pair<costmap_2d::Observation, ScanLimits>>& out)
+{
+  // ObstacleLayer clears with every clearing source before it marks with any. One core pass per observation
+  // (its evidence and the plan trigger's "newly marked" need clearing and marking of a scan together) keeps
+  // that order between clearing-only, dual and marking-only sources; two dual sources each clear right before
+  // they mark.
+  const auto has = [](const std::vector<boost::shared_ptr<costmap_2d::ObservationBuffer>>& buffers,
+                      const boost::shared_ptr<costmap_2d::ObservationBuffer>& buffer) {
+    return std::find(buffers.begin(), buffers.end(), buffer) != buffers.end();
+  };
+  std::vector<std::pair<costmap_2d::Observation, ScanLimits>> by_rank[3];
+  const auto add = [&](const costmap_2d::Observation& observation, bool marking, bool clearing) {
+    ScanLimits limits = params_.limits;  // the layer's heights; ranges and roles are the source's
+    limits.obstacle_range = observation.obstacle_range_;
+    limits.raytrace_range = observation.raytrace_range_;
+    limits.marking = marking;
+    limits.clearing = clearing;
+    by_rank[clearing ? (marking ? 1 : 0) : 2].emplace_back(observation, limits);
+  };
+  bool current = true;
+  for (const auto& buffer : observation_buffers_)
+  {
+    const bool marking = has(marking_buffers_, buffer), clearing = has(clearing_buffers_, buffer);
+    if (!marking && !clearing)
+    {
+      continue;
+    }
+    std::vector<costmap_2d::Observation> observations;
+    buffer->lock();
+    buffer->getObservations(observations);
+    current = current && buffer->isCurrent();
+    buffer->unlock();
+    for (const costmap_2d::Observation& observation : observations)
+    {
+      add(observation, marking, clearing);
+    }
+  }
+  for (const costmap_2d::Observation& observation : static_clearing_observations_)
+  {
+    add(observation, false, true);
+  }
+  for (const costmap_2d::Observation& observation : static_marking_observations_)
+  {
+    add(observation, true, false);
+  }
+  out.clear();
+  for (auto& rank : by_rank)
+  {
+    std::move(rank.begin(), rank.end(), std::back_inserter(out));
+  }
+  return current;
 }
 
 void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, int min_j, int max_i, int max_j)
@@ -637,9 +783,9 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
     {
       core_->resetObstacleLayer();
       const double now = ros::Time::now().toSec();
-      for (const Observation& scan : pre_static_scans_)
+      for (const auto& scan : pre_static_scans_)
       {
-        for (const ObstacleUpdate& update : core_->processScan(scan, now).updates)
+        for (const ObstacleUpdate& update : core_->processScan(scan.first, now, scan.second).updates)
         {
           updates_pub_.publish(toMessage(update, global_frame_));
         }

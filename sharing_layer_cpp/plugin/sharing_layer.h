@@ -92,7 +92,13 @@ private:
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
   /// Scans processed while static_pending_: their cells were judged shareable without the static map
   /// (walls too), so they are replayed once it is read. At most kMaxPreStaticScans, the newest.
-  std::deque<Observation> pre_static_scans_;
+  std::deque<std::pair<Observation, ScanLimits>> pre_static_scans_;
+  /// Moves the layer's and the core's grids with a rolling window (ObstacleLayer's updateOrigin).
+  void followRollingWindow(double robot_x, double robot_y);
+  /// This cycle's observations, each with its source's limits (ranges, marking, clearing), in ObstacleLayer's
+  /// order as far as one pass per observation allows: clearing-only sources, then those that do both, then
+  /// marking-only ones. @return false when a source is not current (ObstacleLayer's current_)
+  bool sourceObservations(std::vector<std::pair<costmap_2d::Observation, ScanLimits>>& out);
   static constexpr std::size_t kMaxPreStaticScans = 100;
   ros::Time stuck_stamp_;
   std::string global_frame_;

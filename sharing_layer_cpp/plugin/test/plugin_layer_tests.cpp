@@ -1,0 +1,339 @@
+// The plugin beside costmap_2d's own ObstacleLayer (issue 13): both fed the same clouds through their real
+// observation buffers, their grids must be byte-identical and their update bounds equal, for a source that marks
+// and clears, for marking-only and clearing-only sources with their own ranges, and in a rolling window. Shared
+// obstacles must keep their place in the world when the map is resized or moved, or the window rolls.
+// Needs a ROS master (parameters, topics): plugin_layer.test.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <set>
+#include <utility>
+#include <string>
+#include <vector>
+
+#include <costmap_2d/cost_values.h>
+#include <costmap_2d/layered_costmap.h>
+#include <costmap_2d/obstacle_layer.h>
+#include <costmap_2d/observation_buffer.h>
+#include <geometry_msgs/TransformStamped.h>
+#include <ros/ros.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <sharing_msgs/SharedObstacle.h>
+#include <tf2_ros/buffer.h>
+
+#include "../sharing_layer.h"
+
+namespace
+{
+/// A layer whose observation buffers can be fed directly, as their topic subscription feeds them.
+template <class Base>
+class Fed : public Base
+{
+public:
+  void feed(std::size_t source, const sensor_msgs::PointCloud2& cloud)
+  {
+    ASSERT_LT(source, this->observation_buffers_.size());
+    this->observation_buffers_[source]->lock();
+    this->observation_buffers_[source]->bufferCloud(cloud);
+    this->observation_buffers_[source]->unlock();
+  }
+};
+using FedObstacleLayer = Fed<costmap_2d::ObstacleLayer>;
+using FedSharingLayer = Fed<sharing_layer::SharingLayer>;
+
+struct Source
+{
+  std::string name;
+  bool marking;
+  bool clearing;
+  double obstacle_range;
+  double raytrace_range;
+};
+
+void setSources(const std::string& layer, const std::vector<Source>& sources)
+{
+  std::string names;
+  for (const Source& s : sources)
+  {
+    names += s.name + " ";
+    const std::string ns = "~" + layer + "/" + s.name + "/";
+    ros::param::set(ns + "topic", "plugin_layer_test_unused_" + s.name);
+    ros::param::set(ns + "data_type", std::string("PointCloud2"));
+    ros::param::set(ns + "sensor_frame", std::string("laser"));
+    ros::param::set(ns + "marking", s.marking);
+    ros::param::set(ns + "clearing", s.clearing);
+    ros::param::set(ns + "obstacle_range", s.obstacle_range);
+    ros::param::set(ns + "raytrace_range", s.raytrace_range);
+  }
+  ros::param::set("~" + layer + "/observation_sources", names);
+  ros::param::set("~" + layer + "/robot_name", std::string("robot_0"));
+  ros::param::set("~" + layer + "/map_topic", std::string("none"));
+  ros::param::set("~" + layer + "/plan_topics", std::string("none"));
+  ros::param::set("~" + layer + "/fleet_robots_topic", std::string("none"));
+}
+
+/// The laser at (x, y, 0.5) in the map.
+void placeLaser(tf2_ros::Buffer& tf, double x, double y)
+{
+  geometry_msgs::TransformStamped t;
+  t.header.frame_id = "map";
+  t.child_frame_id = "laser";
+  t.transform.translation.x = x;
+  t.transform.translation.y = y;
+  t.transform.translation.z = 0.5;
+  t.transform.rotation.w = 1.0;
+  tf.setTransform(t, "plugin_layer_tests", true);
+}
+
+/// Endpoints in the laser frame (z 0): a ring of beams whose lengths sweep from 0.5 m to 7.4 m, so that some are
+/// marked, some only cleared, some cut at raytrace_range and some leave a 10 m map.
+sensor_msgs::PointCloud2 ring(int beams, double phase)
+{
+  sensor_msgs::PointCloud2 cloud;
+  cloud.header.frame_id = "laser";
+  cloud.header.stamp = ros::Time::now();
+  sensor_msgs::PointCloud2Modifier modifier(cloud);
+  modifier.setPointCloud2FieldsByString(1, "xyz");
+  modifier.resize(beams);
+  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
+  for (int i = 0; i < beams; ++i, ++x, ++y, ++z)
+  {
+    const double angle = phase + 2.0 * M_PI * i / beams;
+    const double range = 0.5 + 0.1 * ((i * 7) % 70);
+    *x = static_cast<float>(range * std::cos(angle));
+    *y = static_cast<float>(range * std::sin(angle));
+    *z = 0.0f;
+  }
+  return cloud;
+}
+
+/// Two costmaps, one with each layer, driven alike.
+struct SideBySide
+{
+  tf2_ros::Buffer tf;  // filled with setTransform only (setUsingDedicatedThread: no waiting for it)
+  costmap_2d::LayeredCostmap upstream_costmap;
+  costmap_2d::LayeredCostmap our_costmap;
+  FedObstacleLayer* upstream = nullptr;
+  FedSharingLayer* ours = nullptr;
+
+  SideBySide(const std::string& tag, const std::vector<Source>& sources, bool rolling, unsigned int cells)
+    : upstream_costmap("map", rolling, false), our_costmap("map", rolling, false)
+  {
+    tf.setUsingDedicatedThread(true);
+    setSources("upstream_" + tag, sources);
+    setSources("ours_" + tag, sources);
+    upstream = new FedObstacleLayer();
+    upstream_costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(upstream));
+    upstream->initialize(&upstream_costmap, "upstream_" + tag, &tf);
+    ours = new FedSharingLayer();
+    our_costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(ours));
+    ours->initialize(&our_costmap, "ours_" + tag, &tf);
+    upstream_costmap.resizeMap(cells, cells, 0.05, 0.0, 0.0);
+    our_costmap.resizeMap(cells, cells, 0.05, 0.0, 0.0);
+  }
+
+  void feed(std::size_t source, const sensor_msgs::PointCloud2& cloud)
+  {
+    upstream->feed(source, cloud);
+    ours->feed(source, cloud);
+  }
+
+  void update(double robot_x, double robot_y)
+  {
+    upstream_costmap.updateMap(robot_x, robot_y, 0.0);
+    our_costmap.updateMap(robot_x, robot_y, 0.0);
+  }
+
+  /// Cell centres (world, mm) lethal in our master and not in upstream's.
+  std::set<std::pair<long, long>> onlyInOurs()
+  {
+    std::set<std::pair<long, long>> cells;
+    const costmap_2d::Costmap2D& a = *upstream_costmap.getCostmap();
+    const costmap_2d::Costmap2D& b = *our_costmap.getCostmap();
+    for (unsigned int y = 0; y < b.getSizeInCellsY(); ++y)
+    {
+      for (unsigned int x = 0; x < b.getSizeInCellsX(); ++x)
+      {
+        if (b.getCost(x, y) == costmap_2d::LETHAL_OBSTACLE && a.getCost(x, y) != costmap_2d::LETHAL_OBSTACLE)
+        {
+          double wx = 0.0, wy = 0.0;
+          b.mapToWorld(x, y, wx, wy);
+          cells.emplace(std::lround(wx * 1000.0), std::lround(wy * 1000.0));
+        }
+      }
+    }
+    return cells;
+  }
+
+  /// Byte-identical own grids and masters, equal update bounds, same origin.
+  void expectSame(const std::string& when)
+  {
+    SCOPED_TRACE(when);
+    ASSERT_EQ(upstream->getSizeInCellsX(), ours->getSizeInCellsX());
+    ASSERT_EQ(upstream->getSizeInCellsY(), ours->getSizeInCellsY());
+    EXPECT_DOUBLE_EQ(upstream->getOriginX(), ours->getOriginX());
+    EXPECT_DOUBLE_EQ(upstream->getOriginY(), ours->getOriginY());
+    const std::size_t n = upstream->getSizeInCellsX() * upstream->getSizeInCellsY();
+    std::size_t differ = 0, lethal = 0;
+    for (std::size_t i = 0; i < n; ++i)
+    {
+      differ += upstream->getCharMap()[i] != ours->getCharMap()[i];
+      differ += upstream_costmap.getCostmap()->getCharMap()[i] != our_costmap.getCostmap()->getCharMap()[i];
+      lethal += upstream->getCharMap()[i] == costmap_2d::LETHAL_OBSTACLE;
+    }
+    EXPECT_EQ(0u, differ) << "cells that differ from costmap_2d's ObstacleLayer";
+    EXPECT_GT(lethal, 0u) << "the scene marks something";
+    unsigned int a[4], b[4];
+    upstream_costmap.getBounds(&a[0], &a[1], &a[2], &a[3]);
+    our_costmap.getBounds(&b[0], &b[1], &b[2], &b[3]);
+    for (int k = 0; k < 4; ++k)
+    {
+      EXPECT_EQ(a[k], b[k]) << "update bounds (min_x, max_x, min_y, max_y) element " << k;
+    }
+  }
+};
+
+/// Sends a 3 x 3-cell shared obstacle around world (3.05, 3.05) to the layer, as its handler would, and waits
+/// until the layer has drawn it into the master (the outcome), at most 30 s.
+bool shareBlockAt3m(costmap_2d::LayeredCostmap& costmap, double robot_x, double robot_y)
+{
+  ros::NodeHandle nh;
+  ros::Publisher pub = nh.advertise<sharing_msgs::SharedObstacle>("shared_obstacles", 1, true);
+  sharing_msgs::SharedObstacle msg;
+  msg.header.frame_id = "map";
+  msg.header.stamp = ros::Time::now();
+  msg.uuid = "block-3m";
+  msg.resolution = 0.05f;
+  msg.origin_x = 0.0;
+  msg.origin_y = 0.0;
+  msg.size_x = 200;
+  msg.size_y = 200;
+  for (unsigned int y = 60; y <= 62; ++y)
+  {
+    for (unsigned int x = 60; x <= 62; ++x)
+    {
+      msg.marked_indexes.push_back(y * 200 + x);
+    }
+  }
+  msg.deadline = 600;
+  msg.rectangle_shape = { 2.9f, 2.9f, 3.3f, 3.3f };
+  msg.source = "robot_1";
+  msg.version = 1;
+  pub.publish(msg);
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(30.0);
+  while (ros::WallTime::now() < end)
+  {
+    ros::spinOnce();
+    costmap.updateMap(robot_x, robot_y, 0.0);
+    unsigned int mx = 0, my = 0;
+    if (costmap.getCostmap()->worldToMap(3.05, 3.05, mx, my) &&
+        costmap.getCostmap()->getCost(mx, my) == costmap_2d::LETHAL_OBSTACLE)
+    {
+      return true;
+    }
+    ros::WallDuration(0.02).sleep();
+  }
+  return false;
+}
+
+unsigned char costAt(costmap_2d::LayeredCostmap& costmap, double x, double y)
+{
+  unsigned int mx = 0, my = 0;
+  if (!costmap.getCostmap()->worldToMap(x, y, mx, my))
+  {
+    return 0;
+  }
+  return costmap.getCostmap()->getCost(mx, my);
+}
+}  // namespace
+
+TEST(PluginLayer, ASourceThatMarksAndClearsMatchesObstacleLayer)
+{
+  SideBySide maps("dual", { { "scan", true, true, 2.5, 3.0 } }, false, 200);
+  placeLaser(maps.tf, 5.0, 5.0);
+  maps.feed(0, ring(360, 0.0));
+  maps.update(5.0, 5.0);
+  maps.expectSame("first scan from (5, 5)");
+  placeLaser(maps.tf, 5.6, 4.7);
+  maps.feed(0, ring(360, 0.01));
+  maps.update(5.6, 4.7);
+  maps.expectSame("second scan from (5.6, 4.7), clearing the first's marks");
+}
+
+TEST(PluginLayer, MarkingOnlyAndClearingOnlySourcesWithTheirOwnRangesMatchObstacleLayer)
+{
+  SideBySide maps("roles", { { "marker", true, false, 4.0, 3.0 }, { "clearer", false, true, 2.5, 6.0 } }, false,
+                  200);
+  placeLaser(maps.tf, 5.0, 5.0);
+  maps.feed(0, ring(360, 0.0));
+  maps.feed(1, ring(180, 0.3));
+  maps.update(5.0, 5.0);
+  maps.expectSame("marker and clearer from (5, 5)");
+  placeLaser(maps.tf, 4.2, 5.5);
+  maps.feed(0, ring(360, 0.05));
+  maps.feed(1, ring(180, 0.2));
+  maps.update(4.2, 5.5);
+  maps.expectSame("both again from (4.2, 5.5)");
+}
+
+TEST(PluginLayer, ARollingWindowMovesLikeObstacleLayersAndKeepsSharedObstaclesInTheWorld)
+{
+  SideBySide maps("rolling", { { "scan", true, true, 2.5, 3.0 } }, true, 100);  // a 5 m window
+  placeLaser(maps.tf, 2.0, 2.0);
+  maps.feed(0, ring(360, 0.0));
+  maps.update(2.0, 2.0);
+  maps.expectSame("window around (2, 2)");
+  ASSERT_TRUE(shareBlockAt3m(maps.our_costmap, 2.0, 2.0));
+  // Everything but the shared block is ObstacleLayer's; the block is its 9 cells, where it was sent.
+  std::set<std::pair<long, long>> block;
+  for (long y : { 3025, 3075, 3125 })
+  {
+    for (long x : { 3025, 3075, 3125 })
+    {
+      block.emplace(x, y);
+    }
+  }
+  maps.update(2.0, 2.0);
+  EXPECT_EQ(block, maps.onlyInOurs());
+  placeLaser(maps.tf, 2.6, 2.3);
+  maps.feed(0, ring(360, 0.02));
+  maps.update(2.6, 2.3);
+  EXPECT_NE(maps.upstream->getOriginX(), -0.5) << "the window moved";
+  EXPECT_EQ(block, maps.onlyInOurs()) << "the block stayed where it is in the world as the window rolled";
+}
+
+TEST(PluginLayer, AMapResizeOrMoveKeepsSharedObstaclesWhereTheyAreInTheWorld)
+{
+  tf2_ros::Buffer tf;
+  tf.setUsingDedicatedThread(true);
+  setSources("resized", { { "scan", true, true, 2.5, 3.0 } });
+  costmap_2d::LayeredCostmap costmap("map", false, false);
+  auto* layer = new FedSharingLayer();
+  costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(layer));
+  layer->initialize(&costmap, "resized", &tf);
+  costmap.resizeMap(200, 200, 0.05, 0.0, 0.0);
+  ASSERT_TRUE(shareBlockAt3m(costmap, 5.0, 5.0));
+  costmap.resizeMap(240, 240, 0.05, -1.0, -1.0);  // a larger map, its origin moved
+  costmap.updateMap(5.0, 5.0, 0.0);
+  EXPECT_EQ(costmap_2d::LETHAL_OBSTACLE, costAt(costmap, 3.05, 3.05));
+  costmap.resizeMap(200, 200, 0.1, 0.0, 0.0);  // another resolution
+  costmap.updateMap(5.0, 5.0, 0.0);
+  EXPECT_EQ(costmap_2d::LETHAL_OBSTACLE, costAt(costmap, 3.05, 3.05));
+  costmap.resizeMap(40, 40, 0.05, 5.0, 5.0);  // the block falls off: dropped, nothing drawn
+  costmap.updateMap(6.0, 6.0, 0.0);
+  std::size_t lethal = 0;
+  for (unsigned int i = 0; i < 40 * 40; ++i)
+  {
+    lethal += costmap.getCostmap()->getCharMap()[i] == costmap_2d::LETHAL_OBSTACLE;
+  }
+  EXPECT_EQ(0u, lethal);
+}
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "plugin_layer_tests");
+  testing::InitGoogleTest(&argc, argv);
+  ros::NodeHandle nh;  // keeps the node up for every test
+  return RUN_ALL_TESTS();
+}
