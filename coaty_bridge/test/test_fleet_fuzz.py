@@ -178,10 +178,10 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     # own-sourceId echo: robot_0's own Identity as sourceId (robot_0 suppresses it) and a peer
     # claiming to be robot_1 (without authenticate_sources robot_1 takes it as one of its own
     # obstacles given back after a restart; test_bridge_auth covers the authenticated fleet)
-    echo = peer_update(source="robot_0", rectangle=(4.0, 0.0, 4.5, 0.5))
+    echo = peer_update(source="robot_0", rectangle=(4.0, -2.0, 4.5, -1.5))
     fleet.publish(adv_topic(IDS["robot_0"]), adv_payload(codec.obstacle_to_object(echo, OT)))
     fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(
-        peer_update(source="robot_1", rectangle=(4.5, 1.0, 4.9, 1.4)), OT)))
+        peer_update(source="robot_1", rectangle=(4.4, 1.9, 4.9, 2.4)), OT)))
     fleet.assert_alive("own-sourceId echoes")
 
     # Discover flood: 300 obstacle Discovers (each answered with every obstacle), some malformed
