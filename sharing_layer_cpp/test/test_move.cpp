@@ -19,9 +19,11 @@ using namespace sharing_layer::test;
 
 namespace
 {
-using WorldCell = std::pair<long, long>;  ///< a cell centre in centimetres
+using WorldCell = std::pair<long, long>;  ///< a cell centre in centimetres (or per_metre)
 
-std::set<WorldCell> worldCells(const GridGeometry& g, const std::vector<std::uint32_t>& cells)
+/// per_metre 1000 where grids of different origins put one centre at 2.1749999 and 2.1750001.
+std::set<WorldCell> worldCells(const GridGeometry& g, const std::vector<std::uint32_t>& cells,
+                               double per_metre = 100.0)
 {
   std::set<WorldCell> out;
   for (std::uint32_t index : cells)
@@ -30,7 +32,7 @@ std::set<WorldCell> worldCells(const GridGeometry& g, const std::vector<std::uin
     g.indexToCells(index, mx, my);
     double wx = 0.0, wy = 0.0;
     g.mapToWorld(mx, my, wx, wy);
-    out.emplace(std::lround(wx * 100.0), std::lround(wy * 100.0));
+    out.emplace(std::lround(wx * per_metre), std::lround(wy * per_metre));
   }
   return out;
 }
@@ -234,24 +236,6 @@ TEST(VersionedCellSetRemap, CellsLandingOnOneKeepTheNewestStampAndAClearWinsATie
 
 // A shared obstacle sent on another robot's grid reaches a layer whose grid differs (a rolling window, a map of
 // another size or origin) at the same place in the world.
-namespace
-{
-/// Cell centres in millimetres: grids with different origins put the same centre at 2.1749999 and 2.1750001.
-std::set<WorldCell> worldMm(const GridGeometry& g, const std::vector<std::uint32_t>& cells)
-{
-  std::set<WorldCell> out;
-  for (std::uint32_t index : cells)
-  {
-    unsigned int mx = 0, my = 0;
-    g.indexToCells(index, mx, my);
-    double wx = 0.0, wy = 0.0;
-    g.mapToWorld(mx, my, wx, wy);
-    out.emplace(std::lround(wx * 1000.0), std::lround(wy * 1000.0));
-  }
-  return out;
-}
-}  // namespace
-
 TEST(Reproject, AnUpdateFromAnotherGridKeepsItsCellsInTheWorldAndDropsWhatFallsOff)
 {
   const GridGeometry sender(0.05, 0.0, 0.0, 200, 200);
@@ -271,11 +255,11 @@ TEST(Reproject, AnUpdateFromAnotherGridKeepsItsCellsInTheWorldAndDropsWhatFallsO
   EXPECT_EQ(u.uuid, moved.uuid);
   EXPECT_EQ(u.version, moved.version);
   std::set<WorldCell> expected_marked;
-  for (const WorldCell& c : worldMm(sender, u.marked))
+  for (const WorldCell& c : worldCells(sender, u.marked, 1000.0))
   {
     expected_marked.insert(c);
   }
-  std::set<WorldCell> kept = worldMm(window, moved.marked);
+  std::set<WorldCell> kept = worldCells(window, moved.marked, 1000.0);
   std::size_t off = 0;
   for (const WorldCell& c : expected_marked)
   {
@@ -291,7 +275,7 @@ TEST(Reproject, AnUpdateFromAnotherGridKeepsItsCellsInTheWorldAndDropsWhatFallsO
   }
   EXPECT_GT(off, 0u);
   EXPECT_EQ(off, dropped);
-  EXPECT_EQ(worldMm(sender, u.cleared), worldMm(window, moved.cleared));
+  EXPECT_EQ(worldCells(sender, u.cleared, 1000.0), worldCells(window, moved.cleared, 1000.0));
   // A coarser grid: cells merge; a cell both marked and cleared there stays marked.
   ObstacleUpdate both = u;
   both.cleared = u.marked;

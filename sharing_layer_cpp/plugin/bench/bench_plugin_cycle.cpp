@@ -23,6 +23,7 @@
 #include <tf2_ros/buffer.h>
 
 #include "../../bench/reference_scene.h"
+#include "../messages.h"
 #include "../sharing_layer.h"
 
 namespace
@@ -80,26 +81,6 @@ sensor_msgs::PointCloud2 laserCloud(const Scene& scene)
   return cloud;
 }
 
-sharing_msgs::SharedObstacle toMessage(const sharing_layer::ObstacleUpdate& u)
-{
-  sharing_msgs::SharedObstacle msg;
-  msg.header.frame_id = "map";
-  msg.header.stamp = ros::Time::now();
-  msg.uuid = u.uuid;
-  msg.marked_indexes = u.marked;
-  msg.deadline = u.deadline;
-  msg.rectangle_shape = { static_cast<float>(u.rectangle.min_x), static_cast<float>(u.rectangle.min_y),
-                          static_cast<float>(u.rectangle.max_x), static_cast<float>(u.rectangle.max_y) };
-  msg.source = u.source;
-  msg.resolution = static_cast<float>(u.geometry.resolution);
-  msg.origin_x = u.geometry.origin_x;
-  msg.origin_y = u.geometry.origin_y;
-  msg.size_x = u.geometry.size_x;
-  msg.size_y = u.geometry.size_y;
-  msg.version = u.version;
-  return msg;
-}
-
 /// Shares every crate with the layer through its topic and waits until it has drawn them all (the outcome).
 bool shareCrates(const Scene& scene, costmap_2d::LayeredCostmap& costmap)
 {
@@ -112,7 +93,7 @@ bool shareCrates(const Scene& scene, costmap_2d::LayeredCostmap& costmap)
   }
   for (int i = 0; i < sharing_layer::bench::kCrates; ++i)
   {
-    pub.publish(toMessage(sharing_layer::bench::crateUpdate(scene, i)));
+    pub.publish(sharing_layer::toMessage(sharing_layer::bench::crateUpdate(scene, i), "map"));
   }
   while (ros::WallTime::now() < end)
   {
