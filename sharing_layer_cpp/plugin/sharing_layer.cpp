@@ -4,6 +4,7 @@
 #include <cmath>
 #include <iterator>
 #include <sstream>
+#include <stdexcept>
 #include <utility>
 
 #include <geometry_msgs/TransformStamped.h>
@@ -89,6 +90,11 @@ void SharingLayer::onInitialize()
   }
   std::string own_sources;
   private_nh.param("observation_sources", own_sources, std::string(""));
+  std::istringstream source_names(own_sources);
+  for (std::string name; source_names >> name;)
+  {
+    source_names_.push_back(name);  // ObstacleLayer makes its buffers in this order
+  }
   if (own_sources.find_first_not_of(" \t") == std::string::npos)
   {
     ROS_ERROR("SharingLayer %s: no observation source (set %s/observation_sources): this layer marks nothing and "
@@ -593,7 +599,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     return;
   }
   useExtraBounds(min_x, min_y, max_x, max_y);
-  std::vector<std::pair<costmap_2d::Observation, ScanLimits>> observations;
+  std::vector<SourceObservation> observations;
   current_ = sourceObservations(observations);
 
   std::lock_guard<std::mutex> lock(core_mutex_);
@@ -602,12 +608,24 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     return;
   }
   const double now = ros::Time::now().toSec();
-  for (const auto& source_observation : observations)
+  for (const SourceObservation& source_observation : observations)
   {
-    const costmap_2d::Observation& observation = source_observation.first;
-    const ScanLimits& limits = source_observation.second;
+    const costmap_2d::Observation& observation = source_observation.observation;
+    const ScanLimits& limits = source_observation.limits;
     Observation scan = toObservation(observation);
-    const ScanOutcome outcome = core_->processScan(scan, now, limits);
+    ScanOutcome outcome;
+    try
+    {
+      outcome = core_->processScan(scan, now, limits);
+    }
+    catch (const std::invalid_argument& e)  // a source's ranges (ObstacleLayer takes any value)
+    {
+      ROS_ERROR_THROTTLE(10.0, "SharingLayer (%s): observation source %s skipped: %s (its obstacle_range %g, "
+                               "raytrace_range %g)",
+                         params_.robot_name.c_str(), source_observation.source.c_str(), e.what(),
+                         limits.obstacle_range, limits.raytrace_range);
+      continue;
+    }
     if (static_pending_)
     {
       if (pre_static_scans_.size() == kMaxPreStaticScans)
@@ -663,7 +681,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
   updateFootprint(robot_x, robot_y, robot_yaw, min_x, min_y, max_x, max_y);
 }
 
-bool SharingLayer::sourceObservations(std::vector<std::pair<costmap_2d::Observation, ScanLimits>>& out)
+bool SharingLayer::sourceObservations(std::vector<SourceObservation>& out)
 {
   // ObstacleLayer clears with every clearing source before it marks with any. One core pass per observation
   // (its evidence and the plan trigger's "newly marked" need clearing and marking of a scan together) keeps
@@ -673,18 +691,21 @@ bool SharingLayer::sourceObservations(std::vector<std::pair<costmap_2d::Observat
                       const boost::shared_ptr<costmap_2d::ObservationBuffer>& buffer) {
     return std::find(buffers.begin(), buffers.end(), buffer) != buffers.end();
   };
-  std::vector<std::pair<costmap_2d::Observation, ScanLimits>> by_rank[3];
-  const auto add = [&](const costmap_2d::Observation& observation, bool marking, bool clearing) {
+  std::vector<SourceObservation> by_rank[3];
+  const auto add = [&](const costmap_2d::Observation& observation, bool marking, bool clearing,
+                       const std::string& source) {
     ScanLimits limits = params_.limits;  // the layer's heights; ranges and roles are the source's
     limits.obstacle_range = observation.obstacle_range_;
     limits.raytrace_range = observation.raytrace_range_;
     limits.marking = marking;
     limits.clearing = clearing;
-    by_rank[clearing ? (marking ? 1 : 0) : 2].emplace_back(observation, limits);
+    by_rank[clearing ? (marking ? 1 : 0) : 2].push_back(SourceObservation{ observation, limits, source });
   };
   bool current = true;
-  for (const auto& buffer : observation_buffers_)
+  for (std::size_t i = 0; i < observation_buffers_.size(); ++i)
   {
+    const auto& buffer = observation_buffers_[i];
+    const std::string source = i < source_names_.size() ? source_names_[i] : "#" + std::to_string(i);
     const bool marking = has(marking_buffers_, buffer), clearing = has(clearing_buffers_, buffer);
     if (!marking && !clearing)
     {
@@ -697,16 +718,16 @@ bool SharingLayer::sourceObservations(std::vector<std::pair<costmap_2d::Observat
     buffer->unlock();
     for (const costmap_2d::Observation& observation : observations)
     {
-      add(observation, marking, clearing);
+      add(observation, marking, clearing, source);
     }
   }
   for (const costmap_2d::Observation& observation : static_clearing_observations_)
   {
-    add(observation, false, true);
+    add(observation, false, true, "(static clearing observation)");
   }
   for (const costmap_2d::Observation& observation : static_marking_observations_)
   {
-    add(observation, true, false);
+    add(observation, true, false, "(static marking observation)");
   }
   out.clear();
   for (auto& rank : by_rank)

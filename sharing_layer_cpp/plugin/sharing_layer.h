@@ -98,7 +98,14 @@ private:
   /// This cycle's observations, each with its source's limits (ranges, marking, clearing), in ObstacleLayer's
   /// order as far as one pass per observation allows: clearing-only sources, then those that do both, then
   /// marking-only ones. @return false when a source is not current (ObstacleLayer's current_)
-  bool sourceObservations(std::vector<std::pair<costmap_2d::Observation, ScanLimits>>& out);
+  struct SourceObservation
+  {
+    costmap_2d::Observation observation;
+    ScanLimits limits;
+    std::string source;  ///< its name in observation_sources, for logs
+  };
+  bool sourceObservations(std::vector<SourceObservation>& out);
+  std::vector<std::string> source_names_;  ///< observation_sources, in the order of observation_buffers_
   static constexpr std::size_t kMaxPreStaticScans = 100;
   ros::Time stuck_stamp_;
   std::string global_frame_;

@@ -330,6 +330,29 @@ TEST(PluginLayer, AMapResizeOrMoveKeepsSharedObstaclesWhereTheyAreInTheWorld)
   EXPECT_EQ(0u, lethal);
 }
 
+// ObstacleLayer takes any range; the core refuses a negative one. Bad input: that source is skipped with an
+// error naming it, never an exception out of updateMap (move_base would die).
+TEST(PluginLayer, ASourceWithANegativeRangeIsSkippedNotACrash)
+{
+  tf2_ros::Buffer tf;
+  tf.setUsingDedicatedThread(true);
+  setSources("negative", { { "scan", true, true, -1.0, 3.0 } });
+  costmap_2d::LayeredCostmap costmap("map", false, false);
+  auto* layer = new FedSharingLayer();
+  costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(layer));
+  layer->initialize(&costmap, "negative", &tf);
+  costmap.resizeMap(200, 200, 0.05, 0.0, 0.0);
+  placeLaser(tf, 5.0, 5.0);
+  layer->feed(0, ring(360, 0.0));
+  EXPECT_NO_THROW(costmap.updateMap(5.0, 5.0, 0.0));
+  std::size_t lethal = 0;
+  for (unsigned int i = 0; i < 200 * 200; ++i)
+  {
+    lethal += costmap.getCostmap()->getCharMap()[i] == costmap_2d::LETHAL_OBSTACLE;
+  }
+  EXPECT_EQ(0u, lethal);
+}
+
 int main(int argc, char** argv)
 {
   ros::init(argc, argv, "plugin_layer_tests");
