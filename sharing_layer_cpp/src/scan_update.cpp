@@ -49,10 +49,13 @@ bool usable(const Point3& p, const ScanLimits& limits, ScanTouch& touch)
 }
 
 /// Per-cell scratch flags of one scan (ScanWatch::scratch).
-constexpr std::uint8_t kWatched = 1;
+constexpr std::uint8_t kFlagged = ScanWatch::kFlaggedWatched;  ///< the owner's: watched between scans
 constexpr std::uint8_t kVisitedDeep = 2;     ///< a beam passed with its endpoint at least free_margin beyond
 constexpr std::uint8_t kVisitedShallow = 4;  ///< a beam passed with its endpoint closer
 constexpr std::uint8_t kHit = 8;             ///< an endpoint of this scan lies in the cell
+constexpr std::uint8_t kListed = 16;         ///< listed in the watch for this scan
+constexpr std::uint8_t kWatched = kFlagged | kListed;
+constexpr std::uint8_t kSeen = kVisitedDeep | kVisitedShallow | kHit;  ///< this scan's evidence
 
 /// A monotonic stand-in for atan2(y, x) in [0, 4) (the "diamond angle"): one division instead of atan2.
 inline double pseudoAngle(double x, double y)
@@ -65,10 +68,11 @@ inline double pseudoAngle(double x, double y)
 }
 
 /// The scan's beams as raytraced (endpoint cells after clipping), found by direction from the origin cell so that
-/// the beams able to cross a watched region are found without walking every beam. Raytracing only records each
-/// beam's end cell. Directions are computed when the first region is walked; the first few regions test every
-/// beam's direction (a scan watching one obstacle pays no index), later ones use buckets sorted once. A beam's
-/// line is computed when a region first reaches it.
+/// the beams able to cross a watched region are found without walking every beam. Raytracing only stores each
+/// beam's end cell, by point index. The first few regions test every beam against the region's wedge of
+/// directions (two cross products, vectorised); later ones test only the beams in buckets of pseudo-angle covering
+/// the wedge, sorted once. Beams that end nearer than a region's nearest cell are left out too (most beams towards
+/// a far obstacle end on something in front of it). A beam's line is computed when a region first reaches it.
 class BeamIndex
 {
 public:
@@ -77,29 +81,47 @@ public:
     LineSteps line;
     std::size_t point;         ///< index in the observation
     unsigned int deep_steps;   ///< steps before which a watched cell counts as seen free (kUnset until needed)
+    unsigned int own_steps;    ///< the same by the beam's own range only, >= deep_steps (kUnset until needed)
+    unsigned int end_x, end_y; ///< end cell
+    bool end_is_point;         ///< the end cell holds the point (not clipped to the grid edge)
+    std::uint32_t scan;        ///< BeamIndex's stamp of the scan that filled it
   };
   static constexpr unsigned int kUnset = UINT_MAX;
-  static constexpr int kBuckets = 2048;      ///< about 0.18 degrees each
-  static constexpr int kLinearQueries = 4;  ///< regions answered by testing every beam before buckets pay off
+  static constexpr int kBuckets = 1024;      ///< about 0.35 degrees each
+  static constexpr int kLinearQueries = 2;  ///< regions answered by testing every beam before buckets pay off
 
-  BeamIndex(std::size_t capacity, unsigned int x0, unsigned int y0, unsigned int max_length)
-    : x0_(x0), y0_(y0), max_length_(max_length)
+  /// For an observation of `points` points, raytraced from cell (x0, y0) over at most max_length cells.
+  BeamIndex(std::size_t points, unsigned int x0, unsigned int y0, unsigned int max_length)
+    : x0_(x0), y0_(y0), max_length_(max_length), n_(static_cast<std::uint32_t>(points)), s_(storage())
   {
-    ends_.reserve(capacity);
+    if (s_.dx.size() < points)
+    {
+      s_.dx.resize(points);
+      s_.dy.resize(points);
+      s_.pass.resize(points);
+    }
+    s_.state.assign(points, kNone);
+    dx_ = s_.dx.data();
+    dy_ = s_.dy.data();
+    state_ = s_.state.data();
   }
 
-  void add(std::size_t point, unsigned int x1, unsigned int y1)
+  /// The beam of point `point` ends in cell (x1, y1); clipped: the point lies off the grid, (x1, y1) on its edge.
+  void add(std::size_t point, unsigned int x1, unsigned int y1, bool clipped)
   {
-    ends_.push_back(End{ x1, y1, static_cast<std::uint32_t>(point) });
+    // Single precision holds any cell offset of a grid below 2^24 cells a side exactly.
+    dx_[point] = static_cast<float>(static_cast<std::int32_t>(x1) - static_cast<std::int32_t>(x0_));
+    dy_[point] = static_cast<float>(static_cast<std::int32_t>(y1) - static_cast<std::int32_t>(y0_));
+    state_[point] = clipped ? kClipped : kEndsInPoint;
   }
 
-  /// Calls f(beam) for every beam whose direction can cross a cell of [min_x, max_x] x [min_y, max_y]: its
-  /// pseudo-angle lies within that of the rectangle's corners grown by the slack of a Bresenham line. No add
-  /// after the first call.
+  /// Calls f(beam) for every beam that can visit a cell of [min_x, max_x] x [min_y, max_y]: its direction lies
+  /// within the directions of the rectangle's corners grown by the slack of a Bresenham line, and its end cell is
+  /// not nearer than the rectangle. No add after the first call.
   template <class F>
   void forEachTowards(int min_x, int min_y, int max_x, int max_y, F f)
   {
-    if (angles_.empty())
+    if (!prepared_)
     {
       prepare();
     }
@@ -109,41 +131,107 @@ public:
     constexpr double kGrow = 0.5 + 0.05;
     const double x_lo = min_x - static_cast<double>(x0_) - kGrow, x_hi = max_x - static_cast<double>(x0_) + kGrow;
     const double y_lo = min_y - static_cast<double>(y0_) - kGrow, y_hi = max_y - static_cast<double>(y0_) + kGrow;
-    if (x_lo <= 0.5 && x_hi >= -0.5 && y_lo <= 0.5 && y_hi >= -0.5)
-    {
-      visit(0.0, 4.0, f);  // around the origin: every direction
-      return;
-    }
+    // The cells a beam visits lie within half a cell beyond its end cell's distance from the origin cell (step i
+    // is i cells along a and within half a cell of the exact line along b).
+    const double near_x = std::max(0.0, std::max(min_x - static_cast<double>(x0_), static_cast<double>(x0_) - max_x));
+    const double near_y = std::max(0.0, std::max(min_y - static_cast<double>(y0_), static_cast<double>(y0_) - max_y));
+    // (near - 0.5)^2 >= near^2 - (near_x + near_y), as near <= near_x + near_y: a bound without a square root.
+    const double reach_sq = near_x * near_x + near_y * near_y - (near_x + near_y);
+    Wedge w;
+    // Single precision, so that testing every beam vectorises; the thresholds are loosened far beyond its rounding
+    // (a beam let through in excess is walked to no effect).
+    w.reach_sq = reach_sq > 0.0 ? static_cast<float>(reach_sq * (1.0 - 1e-5)) : -1.0f;
+    const bool around_origin = x_lo <= 0.5 && x_hi >= -0.5 && y_lo <= 0.5 && y_hi >= -0.5;
     const double corners[4][2] = { { x_lo, y_lo }, { x_hi, y_lo }, { x_lo, y_hi }, { x_hi, y_hi } };
-    double a[4];
-    double lo = 4.0, hi = 0.0;
-    for (int i = 0; i < 4; ++i)
+    int first = 0, last = 0;
+    if (!around_origin)  // (around it, the zero wedge admits every direction)
     {
-      a[i] = pseudoAngle(corners[i][0], corners[i][1]);
-      lo = std::min(lo, a[i]);
-      hi = std::max(hi, a[i]);
-    }
-    if (hi - lo > 2.0)  // straddles the +x axis (0 / 4): two intervals
-    {
-      double below = 0.0, above = 4.0;
-      for (double v : a)
+      // The rectangle does not hold the origin, so its directions span less than half a turn: the clockwise-most
+      // and counter-clockwise-most corners bound them, and a beam lies between them when both cross products
+      // are >= 0.
+      const auto cross = [](double ax, double ay, double bx, double by) { return ax * by - ay * bx; };
+      for (int j = 1; j < 4; ++j)
       {
-        (v < 2.0 ? below : above) = v < 2.0 ? std::max(below, v) : std::min(above, v);
+        if (cross(corners[first][0], corners[first][1], corners[j][0], corners[j][1]) < 0.0)
+        {
+          first = j;
+        }
+        if (cross(corners[last][0], corners[last][1], corners[j][0], corners[j][1]) > 0.0)
+        {
+          last = j;
+        }
       }
-      visit(0.0, below, f);
-      visit(above, 4.0, f);
+      w.first_x = static_cast<float>(corners[first][0]);
+      w.first_y = static_cast<float>(corners[first][1]);
+      w.last_x = static_cast<float>(corners[last][0]);
+      w.last_y = static_cast<float>(corners[last][1]);
+    }
+    const float* dx = dx_;
+    const float* dy = dy_;
+    const std::uint8_t* state = state_;
+    if (queries_ < kLinearQueries)  // test every beam
+    {
+      ++queries_;
+      std::uint8_t* pass = s_.pass.data();
+      const std::uint32_t n = n_;  // a local: the byte stores below could alias a member
+      for (std::uint32_t i = 0; i < n; ++i)  // (a point without a beam holds an old direction: state says so)
+      {
+        pass[i] = (state[i] != kNone) & w.admits(dx[i], dy[i]);
+      }
+      for (std::uint32_t i = 0; i < n; ++i)
+      {
+        if (pass[i])
+        {
+          visitBeam(i, f);
+        }
+      }
       return;
     }
-    visit(lo, hi, f);
+    if (!bucketed_)
+    {
+      buildBuckets();
+    }
+    const auto visit_range = [&](double lo, double hi) {
+      for (std::uint32_t k = s_.start[bucketOf(lo)]; k < s_.start[bucketOf(hi) + 1]; ++k)
+      {
+        const std::uint32_t i = s_.order[k];
+        if (state[i] != kNone && w.admits(dx[i], dy[i]))
+        {
+          visitBeam(i, f);
+        }
+      }
+    };
+    if (around_origin)
+    {
+      visit_range(0.0, 4.0);
+      return;
+    }
+    // The wedge runs counter-clockwise from the first corner's direction to the last's.
+    const double lo = pseudoAngle(corners[first][0], corners[first][1]);
+    const double hi = pseudoAngle(corners[last][0], corners[last][1]);
+    if (lo > hi)  // straddles the +x axis (0 / 4): two intervals
+    {
+      visit_range(lo, 4.0);
+      visit_range(0.0, hi);
+      return;
+    }
+    visit_range(lo, hi);
   }
 
-  bool empty() const { return ends_.empty(); }
-
 private:
-  struct End
+  static constexpr std::uint8_t kNone = 0;        ///< the point made no beam (unusable, or no clearing)
+  static constexpr std::uint8_t kEndsInPoint = 1;
+  static constexpr std::uint8_t kClipped = 2;
+
+  /// Directions between first and last (counter-clockwise; all zero: every direction), and a least squared length.
+  struct Wedge
   {
-    std::uint32_t x1, y1;
-    std::uint32_t point;
+    float first_x = 0.0f, first_y = 0.0f, last_x = 0.0f, last_y = 0.0f;
+    float reach_sq = -1.0f;
+    bool admits(float x, float y) const
+    {
+      return (first_x * y - first_y * x >= 0.0f) & (x * last_y - y * last_x >= 0.0f) & (x * x + y * y >= reach_sq);
+    }
   };
 
   static int bucketOf(double angle)
@@ -153,89 +241,114 @@ private:
 
   void prepare()
   {
-    angles_.resize(ends_.size());
-    for (std::size_t i = 0; i < ends_.size(); ++i)
+    if (s_.beams.size() < n_)
     {
-      const int dx = static_cast<int>(ends_[i].x1) - static_cast<int>(x0_);
-      const int dy = static_cast<int>(ends_[i].y1) - static_cast<int>(y0_);
-      angles_[i] = pseudoAngle(dx, dy);
+      s_.beams.resize(n_);  // a beam is filled when first reached in a scan
     }
-    beams_.reset(new Beam[ends_.size()]);  // left uninitialised: a beam is filled when first reached
-    line_ready_.assign(ends_.size(), 0);
+    if (++s_.scan == 0)  // wrapped: stamps of old scans could match again
+    {
+      for (Beam& beam : s_.beams)
+      {
+        beam.scan = 0;
+      }
+      s_.scan = 1;
+    }
+    prepared_ = true;
   }
 
-  /// Counting sort by bucket into order_; afterwards bucket b holds order_[start_[b] .. start_[b + 1]).
+  /// Counting sort by the bucket of each beam's pseudo-angle into order; afterwards bucket b holds
+  /// order[start[b] .. start[b + 1]).
   void buildBuckets()
   {
-    start_.assign(kBuckets + 2, 0);
-    bucket_of_.resize(ends_.size());
-    for (std::size_t i = 0; i < ends_.size(); ++i)
+    s_.start.assign(kBuckets + 2, 0);
+    s_.bucket_of.resize(n_);
+    const float* dx = s_.dx.data();
+    const float* dy = s_.dy.data();
+    std::uint16_t* bucket_of = s_.bucket_of.data();
+    const std::uint32_t n = n_;
+    for (std::uint32_t i = 0; i < n; ++i)  // pseudoAngle without branches, so that it vectorises
     {
-      bucket_of_[i] = static_cast<std::uint16_t>(bucketOf(angles_[i]));
-      ++start_[bucket_of_[i] + 2];
+      const float sum = std::max(std::fabs(dx[i]) + std::fabs(dy[i]), 1e-30f);
+      const float p = dy[i] / sum;  // [-1, 1]
+      // x >= 0: p, or 4 + p below the axis; x < 0: 2 - p (pseudoAngle's four quadrants)
+      const float right = static_cast<float>(dx[i] >= 0.0f), below = static_cast<float>(p < 0.0f);
+      const float angle = right * (p + 4.0f * below) + (1.0f - right) * (2.0f - p);
+      // (a point without a beam lands in some bucket, and is never admitted)
+      bucket_of[i] = static_cast<std::uint16_t>(
+          std::max(0.0f, std::min(static_cast<float>(kBuckets - 1), angle * (kBuckets / 4.0f))));
+    }
+    for (std::uint32_t i = 0; i < n; ++i)
+    {
+      ++s_.start[bucket_of[i] + 2];
     }
     for (int b = 2; b < kBuckets + 2; ++b)
     {
-      start_[b] += start_[b - 1];
+      s_.start[b] += s_.start[b - 1];
     }
-    // Bucket b's entries are placed from start_[b + 1] on, which then ends where bucket b + 1 begins.
-    order_.resize(ends_.size());
-    for (std::size_t i = 0; i < ends_.size(); ++i)
+    // Bucket b's entries are placed from start[b + 1] on, which then ends where bucket b + 1 begins.
+    s_.order.resize(n);
+    for (std::uint32_t i = 0; i < n; ++i)
     {
-      order_[start_[bucket_of_[i] + 1]++] = static_cast<std::uint32_t>(i);
+      s_.order[s_.start[bucket_of[i] + 1]++] = i;
     }
+    bucketed_ = true;
   }
 
   template <class F>
   void visitBeam(std::uint32_t i, F& f)
   {
-    Beam& beam = beams_[i];
-    if (!line_ready_[i])
+    Beam& beam = s_.beams[i];
+    if (beam.scan != s_.scan)
     {
-      beam.line = lineSteps(x0_, y0_, ends_[i].x1, ends_[i].y1, max_length_);  // as raytraced
-      beam.point = ends_[i].point;
+      beam.scan = s_.scan;
+      beam.end_x = static_cast<unsigned int>(static_cast<int>(x0_) + static_cast<int>(dx_[i]));
+      beam.end_y = static_cast<unsigned int>(static_cast<int>(y0_) + static_cast<int>(dy_[i]));
+      beam.line = lineSteps(x0_, y0_, beam.end_x, beam.end_y, max_length_);  // as raytraced
+      beam.point = i;
       beam.deep_steps = kUnset;
-      line_ready_[i] = 1;
+      beam.own_steps = kUnset;
+      beam.end_is_point = state_[i] == kEndsInPoint;
     }
     f(beam);
   }
 
-  /// Every beam whose pseudo-angle lies in [lo, hi] (and, once bucketed, some just outside it).
-  template <class F>
-  void visit(double lo, double hi, F& f)
+  /// Buffers kept from scan to scan, one set per thread: once grown, a scan allocates nothing for its beams.
+  struct Storage
   {
-    if (queries_ < kLinearQueries)
-    {
-      ++queries_;
-      for (std::uint32_t i = 0; i < angles_.size(); ++i)
-      {
-        if (angles_[i] >= lo && angles_[i] <= hi)
-        {
-          visitBeam(i, f);
-        }
-      }
-      return;
-    }
-    if (order_.size() != ends_.size())
-    {
-      buildBuckets();
-    }
-    for (std::uint32_t k = start_[bucketOf(lo)]; k < start_[bucketOf(hi) + 1]; ++k)
-    {
-      visitBeam(order_[k], f);
-    }
+    std::vector<std::uint8_t> state;         ///< per point: kNone, kEndsInPoint or kClipped
+    std::vector<float> dx, dy;               ///< per point with a beam: end cell minus origin cell
+    std::vector<std::uint8_t> pass;          ///< wedge test of every beam
+    std::vector<Beam> beams;
+    std::uint32_t scan = 0;  ///< stamp of the current scan: a beam with another stamp is not filled yet
+    std::vector<std::uint16_t> bucket_of;
+    std::vector<std::uint32_t> start;  ///< see buildBuckets
+    std::vector<std::uint32_t> order;  ///< beam indexes by bucket
+  };
+  static Storage& storage()
+  {
+    thread_local Storage storage;
+    return storage;
   }
 
   unsigned int x0_, y0_, max_length_;
-  std::vector<End> ends_;
-  std::vector<double> angles_;  ///< pseudo-angle of each beam's end cell from the origin cell
-  std::unique_ptr<Beam[]> beams_;
-  std::vector<std::uint8_t> line_ready_;
+  std::uint32_t n_;
+  Storage& s_;
+  float* dx_;
+  float* dy_;
+  std::uint8_t* state_;
+  bool prepared_ = false;
+  bool bucketed_ = false;
   int queries_ = 0;
-  std::vector<std::uint16_t> bucket_of_;
-  std::vector<std::uint32_t> start_;  ///< see buildBuckets
-  std::vector<std::uint32_t> order_;  ///< beam indexes by bucket
 };
+
+/// @return whether cell (x, y) lies in one of the rectangles (flagged cells are watched only there)
+bool inRegion(const std::vector<CellRect>& regions, unsigned int x, unsigned int y)
+{
+  return std::any_of(regions.begin(), regions.end(), [x, y](const CellRect& r) {
+    return static_cast<int>(x) >= r.min_x && static_cast<int>(x) <= r.max_x && static_cast<int>(y) >= r.min_y &&
+           static_cast<int>(y) <= r.max_y;
+  });
+}
 
 void sortUnique(std::vector<std::uint32_t>& cells)
 {
@@ -306,9 +419,11 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   {
     for (std::uint32_t index : *list)
     {
-      flags[index] = kWatched;
+      flags[index] |= kListed;
     }
   }
+  // Watched cells given evidence by this scan, each once: the cells to read back and reset.
+  std::vector<std::uint32_t> seen_cells;
 
   // Clearing, exactly as without a watch; the beams that reach a watched cell are walked again below.
   const double ox = observation.origin.x;
@@ -333,6 +448,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       }
       double wx = p.x;
       double wy = p.y;
+      bool clipped = false;
       const double a = wx - ox;
       const double b = wy - oy;
       // Clip the endpoint to the grid as costmap_2d does, so beams leaving the map still clear inside it.
@@ -340,6 +456,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       {
         const double t = (g.origin_x - ox) / a;
         wx = g.origin_x;
+        clipped = true;
         wy = oy + b * t;
       }
       if (wy < g.origin_y)
@@ -347,11 +464,13 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         const double t = (g.origin_y - oy) / b;
         wx = ox + a * t;
         wy = g.origin_y;
+        clipped = true;
       }
       if (wx > map_end_x)
       {
         const double t = (map_end_x - ox) / a;
         wx = map_end_x - .001;
+        clipped = true;
         wy = oy + b * t;
       }
       if (wy > map_end_y)
@@ -359,6 +478,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         const double t = (map_end_y - oy) / b;
         wx = ox + a * t;
         wy = map_end_y - .001;
+        clipped = true;
       }
       unsigned int x1 = 0, y1 = 0;
       if (!g.worldToMap(wx, wy, x1, y1))
@@ -378,7 +498,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
                   y0 * g.size_x + x0, line.end);
       if (watching)
       {
-        beams.add(pi, x1, y1);
+        beams.add(pi, x1, y1, clipped);
       }
     }
   }
@@ -388,15 +508,18 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   // the beams that graze it).
   const double sq_obstacle_range = limits.obstacle_range * limits.obstacle_range;
   const double oz = observation.origin.z;
+  // When clearing recorded the beams, the walk below finds the endpoints in watched cells beyond obstacle_range
+  // (it visits every beam whose end cell lies in a region); otherwise every endpoint within reach is looked up.
+  const bool hits_in_walk = watching && clearing;
   // Endpoints farther than the farthest watched cell (plus a cell) cannot lie in one.
   double sq_hit_range = -1.0;
-  const auto farther = [&](unsigned int cx, unsigned int cy) {
-    double wx = 0.0, wy = 0.0;
-    g.mapToWorld(cx, cy, wx, wy);
-    sq_hit_range = std::max(sq_hit_range, (wx - ox) * (wx - ox) + (wy - oy) * (wy - oy));
-  };
-  if (!watch.regions.empty())
+  if (watching && !hits_in_walk)
   {
+    const auto farther = [&](unsigned int cx, unsigned int cy) {
+      double wx = 0.0, wy = 0.0;
+      g.mapToWorld(cx, cy, wx, wy);
+      sq_hit_range = std::max(sq_hit_range, (wx - ox) * (wx - ox) + (wy - oy) * (wy - oy));
+    };
     for (const CellRect& r : watch.regions)  // the farthest corner of each
     {
       if (!r.empty())
@@ -410,24 +533,24 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         }
       }
     }
-  }
-  for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
-  {
-    if (list == &watch.cells && !watch.regions.empty())
+    for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
     {
-      continue;  // the regions' corners bound them
+      if (list == &watch.cells && !watch.regions.empty())
+      {
+        continue;  // the regions' corners bound them
+      }
+      for (std::uint32_t index : *list)
+      {
+        unsigned int cx = 0, cy = 0;
+        g.indexToCells(index, cx, cy);
+        farther(cx, cy);
+      }
     }
-    for (std::uint32_t index : *list)
+    if (sq_hit_range >= 0.0)
     {
-      unsigned int cx = 0, cy = 0;
-      g.indexToCells(index, cx, cy);
-      farther(cx, cy);
+      const double r = std::sqrt(sq_hit_range) + 1.5 * g.resolution;
+      sq_hit_range = r * r;
     }
-  }
-  if (sq_hit_range >= 0.0)
-  {
-    const double r = std::sqrt(sq_hit_range) + 1.5 * g.resolution;
-    sq_hit_range = r * r;
   }
   for (const Point3& p : observation.points)
   {
@@ -439,7 +562,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     const double sq_dist = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + (p.z - oz) * (p.z - oz);
     const bool in_range = limits.marking && sq_dist < sq_obstacle_range;
     const double sq_planar = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy);
-    if (!in_range && !(watching && sq_planar <= sq_hit_range))
+    if (!in_range && !(sq_planar <= sq_hit_range))
     {
       continue;
     }
@@ -449,8 +572,13 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       continue;
     }
     const std::uint32_t index = g.getIndex(mx, my);
-    if (watching && (flags[index] & kWatched) && !(flags[index] & kHit))
+    if (watching && (flags[index] & kWatched) && !(flags[index] & kHit) &&
+        ((flags[index] & kListed) || inRegion(watch.regions, mx, my)))
     {
+      if (!(flags[index] & kSeen))
+      {
+        seen_cells.push_back(index);
+      }
       flags[index] |= kHit;
       touch.watched_hit.push_back(index);
     }
@@ -465,32 +593,59 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   // region are walked, and only over the steps inside it: the cost grows with the watched area in view, not
   // with the length of the beams. After marking, so that loose cells marked again (not seen free whatever the
   // beams did) are not walked at all.
-  if (watching && !beams.empty())
+  if (watching && clearing)
   {
-    const auto shadow_deep_steps = [&](BeamIndex::Beam& beam) {
-      // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam (the face
-      // it hit, a neighbour it grazed) only clears. Shadow filter: the shortest range among this point and its
-      // free_neighbours neighbours on each side.
-      const Point3& p = observation.points[beam.point];
-      double shadow_sq = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy);
-      const std::size_t n = observation.points.size();
-      const std::size_t k = watch.free_neighbours;
-      const std::size_t lo = beam.point >= k ? beam.point - k : 0;
-      const std::size_t hi = std::min(n - 1, beam.point + k);
-      for (std::size_t j = lo; j <= hi; ++j)
+    // Each point's planar range squared (+inf when not finite; -1 until a beam needs it).
+    std::vector<double> range_sq;
+    const std::size_t n = observation.points.size();
+    const auto point_range_sq = [&](std::size_t j) {
+      if (range_sq.empty())
+      {
+        range_sq.assign(n, -1.0);
+      }
+      if (range_sq[j] < 0.0)
       {
         const Point3& q = observation.points[j];
         const double r_sq = (q.x - ox) * (q.x - ox) + (q.y - oy) * (q.y - oy);
-        if (std::isfinite(r_sq))
-        {
-          shadow_sq = std::min(shadow_sq, r_sq);
-        }
+        range_sq[j] = std::isfinite(r_sq) ? r_sq : std::numeric_limits<double>::infinity();
+      }
+      return range_sq[j];
+    };
+    // Cells up to free_margin before the (unclipped) endpoint are seen free; the rest of the beam (the face it hit,
+    // a neighbour it grazed) only clears. By the beam's own range first: most beams that reach a watched cell end
+    // on it, and the shadow filter below can only shorten what is seen free.
+    const auto own_deep_steps = [&](BeamIndex::Beam& beam) {
+      const double deep_until = (std::sqrt(point_range_sq(beam.point)) - watch.free_margin) / g.resolution;
+      return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist);
+    };
+    // Shadow filter: the shortest range among this point and its free_neighbours neighbours on each side.
+    const auto shadow_deep_steps = [&](BeamIndex::Beam& beam) {
+      const std::size_t k = watch.free_neighbours;
+      const std::size_t lo = beam.point >= k ? beam.point - k : 0;
+      const std::size_t hi = std::min(n - 1, beam.point + k);
+      double shadow_sq = std::numeric_limits<double>::infinity();
+      for (std::size_t j = lo; j <= hi; ++j)
+      {
+        shadow_sq = std::min(shadow_sq, point_range_sq(j));
       }
       const double deep_until = (std::sqrt(shadow_sq) - watch.free_margin) / g.resolution;
       return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist);
     };
     const auto walk_region = [&](const CellRect& r) {
       beams.forEachTowards(r.min_x, r.min_y, r.max_x, r.max_y, [&](BeamIndex::Beam& beam) {
+        if (beam.end_is_point && r.contains(static_cast<int>(beam.end_x), static_cast<int>(beam.end_y)))
+        {
+          const std::uint32_t end = g.getIndex(beam.end_x, beam.end_y);
+          if ((flags[end] & kWatched) && !(flags[end] & kHit))  // an endpoint in a watched cell, at any range
+          {
+            if (!(flags[end] & kSeen))
+            {
+              seen_cells.push_back(end);
+            }
+            flags[end] |= kHit;
+            touch.watched_hit.push_back(end);
+          }
+        }
         const LineSteps& line = beam.line;
         const int a0 = static_cast<int>(line.x_major ? x0 : y0);
         const int b0 = static_cast<int>(line.x_major ? y0 : x0);
@@ -534,11 +689,24 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
             const std::uint32_t index = line.x_major ? g.getIndex(a, b) : g.getIndex(b, a);
             if (flags[index] & kWatched)
             {
-              if (beam.deep_steps == BeamIndex::kUnset)
+              if (!(flags[index] & kSeen))
               {
-                beam.deep_steps = shadow_deep_steps(beam);
+                seen_cells.push_back(index);
               }
-              flags[index] |= static_cast<unsigned int>(i) < beam.deep_steps ? kVisitedDeep : kVisitedShallow;
+              if (beam.own_steps == BeamIndex::kUnset)
+              {
+                beam.own_steps = own_deep_steps(beam);
+              }
+              bool deep = false;
+              if (static_cast<unsigned int>(i) < beam.own_steps)
+              {
+                if (beam.deep_steps == BeamIndex::kUnset)
+                {
+                  beam.deep_steps = shadow_deep_steps(beam);
+                }
+                deep = static_cast<unsigned int>(i) < beam.deep_steps;
+              }
+              flags[index] |= deep ? kVisitedDeep : kVisitedShallow;
             }
           }
           error += line.abs_db;
@@ -583,22 +751,29 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   }
   sortUnique(touch.marked);
 
-  // Read the flags back and leave the scratch zeroed. A visited cell that is lethal now was marked again by this
-  // scan: not seen free, as costmap_2d keeps it.
-  for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
+  // Read the flags back and leave the scratch as it was. A visited cell that is lethal now was marked again by
+  // this scan: not seen free, as costmap_2d keeps it.
+  for (std::uint32_t index : seen_cells)
   {
-    for (std::uint32_t index : *list)
+    const std::uint8_t f = flags[index];
+    flags[index] = f & ~kSeen;
+    if (!(f & (kVisitedDeep | kVisitedShallow)) || costs[index] == LETHAL_OBSTACLE)
     {
-      const std::uint8_t f = flags[index];
-      flags[index] = 0;
-      if (!(f & (kVisitedDeep | kVisitedShallow)) || costs[index] == LETHAL_OBSTACLE)
+      continue;  // only hit, or marked again
+    }
+    touch.watched_cleared.push_back(index);
+    if ((f & kVisitedDeep) && !(f & kHit))
+    {
+      touch.watched_free.push_back(index);
+    }
+  }
+  if (watching)
+  {
+    for (const std::vector<std::uint32_t>* list : { &watch.cells, &watch.loose_cells })
+    {
+      for (std::uint32_t index : *list)
       {
-        continue;  // untouched, marked again, or a duplicate already read
-      }
-      touch.watched_cleared.push_back(index);
-      if ((f & kVisitedDeep) && !(f & kHit))
-      {
-        touch.watched_free.push_back(index);
+        flags[index] &= ~kListed;
       }
     }
   }

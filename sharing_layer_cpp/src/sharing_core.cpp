@@ -237,6 +237,9 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   watch.free_neighbours = params_.clearing_neighbours;
   watch.scratch = cell_flags_.data();
   watch.scratch_size = cell_flags_.size();
+  // The present cells stay flagged in cell_flags_ between scans (refreshed when they change); the boxes of those in
+  // view are the watch's regions.
+  refreshSharedFlags();
   if (origin_finite)
   {
     for (auto& entry : shared_)
@@ -245,23 +248,9 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       if (!obstacle.rectangle_cells.empty() && obstacle.rectangle.withinRadius(ox, oy, view_radius))
       {
         in_view.push_back(&obstacle);
-        const std::vector<std::uint32_t>& present = obstacle.cells.present();
-        watch.cells.insert(watch.cells.end(), present.begin(), present.end());
-        if (!present.empty())  // the bounding box of its present cells (sorted: first and last give the rows)
+        if (!obstacle.present_box.empty())
         {
-          CellRect box{ std::numeric_limits<int>::max(), 0, std::numeric_limits<int>::min(), 0 };
-          unsigned int mx = 0, my = 0;
-          g.indexToCells(present.front(), mx, my);
-          box.min_y = static_cast<int>(my);
-          g.indexToCells(present.back(), mx, my);
-          box.max_y = static_cast<int>(my);
-          for (std::uint32_t index : present)
-          {
-            const int x = static_cast<int>(index % g.size_x);
-            box.min_x = std::min(box.min_x, x);
-            box.max_x = std::max(box.max_x, x);
-          }
-          watch.regions.push_back(box);
+          watch.regions.push_back(obstacle.present_box);
         }
       }
     }
@@ -336,19 +325,21 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   // by a beam that ended close behind it (the face it hit, or a neighbour it grazed).
   std::vector<std::uint32_t> occupied;
   {
+    // Every list is sorted: merged, not sorted again.
     const ScanTouch& t = outcome.touch;
+    std::vector<std::uint32_t> grazed, marked_known;
     std::set_difference(t.watched_cleared.begin(), t.watched_cleared.end(), t.watched_free.begin(),
-                        t.watched_free.end(), std::back_inserter(occupied));
-    occupied.insert(occupied.end(), t.watched_hit.begin(), t.watched_hit.end());
+                        t.watched_free.end(), std::back_inserter(grazed));
     for (std::uint32_t index : t.marked)
     {
       if (monitored_[index] != 0 || memory_.count(index) != 0)
       {
-        occupied.push_back(index);
+        marked_known.push_back(index);
       }
     }
-    std::sort(occupied.begin(), occupied.end());
-    occupied.erase(std::unique(occupied.begin(), occupied.end()), occupied.end());
+    std::vector<std::uint32_t> signs;
+    std::set_union(grazed.begin(), grazed.end(), t.watched_hit.begin(), t.watched_hit.end(), std::back_inserter(signs));
+    std::set_union(signs.begin(), signs.end(), marked_known.begin(), marked_known.end(), std::back_inserter(occupied));
   }
   remember(outcome.touch, occupied, observation, now_s);
   last_scan_time_ = now_s;
@@ -419,20 +410,25 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       }
     }
   };
+  std::vector<std::uint32_t> marked, cleared;  // of one obstacle; most obstacles in view get neither
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
-    ObstacleUpdate update;
+    marked.clear();
+    cleared.clear();
     seen_again.clear();
     for_each_in(marked_watched, r, [&](std::uint32_t index) {
       // Walls, and a fleet robot standing on the cell: neither new cells nor an observation of the obstacle.
       if (!static_filter_.isStatic(index) && !fleet_robots_.excludes(index))
       {
-        (obstacle->cells.isPresent(index) ? seen_again : update.marked).push_back(index);
+        (obstacle->cells.isPresent(index) ? seen_again : marked).push_back(index);
       }
     });
     // A sign of occupancy: the evidence of free space starts again.
-    for_each_in(occupied, r, [&](std::uint32_t index) { obstacle->free_streaks.erase(index); });
+    if (!obstacle->free_streaks.empty())
+    {
+      for_each_in(occupied, r, [&](std::uint32_t index) { obstacle->free_streaks.erase(index); });
+    }
     // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough (a beam
     // grazing along a face through the free part of its cells, localisation jitter): an unbroken streak of
     // clearing_scans scans over clearing_time clears the cell. (occupied and seen_free share no cell.)
@@ -441,29 +437,32 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
           obstacle->free_streaks[index].add(now_s, params_.clearing_scans, params_.clearing_time))
       {
         obstacle->free_streaks.erase(index);
-        update.cleared.push_back(index);
+        cleared.push_back(index);
       }
     });
     const int gap = static_cast<int>(params_.cluster_gap);
     if (!steady.empty() && r.min_x - gap <= steady_box.max_x && steady_box.min_x <= r.max_x + gap &&
         r.min_y - gap <= steady_box.max_y && steady_box.min_y <= r.max_y + gap)
     {
-      growInto(*obstacle, steady, update.marked);
+      growInto(*obstacle, steady, marked);
     }
     // Lease: cells seen occupied again renew the obstacle; sent when nobody renewed it for a while.
-    if (update.marked.empty() && !seen_again.empty() &&
+    if (marked.empty() && !seen_again.empty() &&
         !(now_s - obstacle->last_observation < params_.lease_renewal_interval))
     {
-      update.marked = seen_again;
+      marked = seen_again;
     }
-    if (update.marked.empty() && update.cleared.empty())
+    if (marked.empty() && cleared.empty())
     {
       continue;
     }
-    if (!update.marked.empty())
+    if (!marked.empty())
     {
       obstacle->last_observation = now_s;
     }
+    ObstacleUpdate update;
+    update.marked = marked;
+    update.cleared = cleared;
     update.uuid = obstacle->uuid;
     update.deadline = obstacle->deadline;
     update.rectangle = obstacle->rectangle;
@@ -472,14 +471,14 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     update.version = obstacle->max_version + 1;
     update.stamp = now_s;
     obstacle->max_version = update.version;
-    obstacle->cells.apply(update.marked, update.cleared, update.version, update.source);
+    shared_flags_stale_ |= obstacle->cells.apply(update.marked, update.cleared, update.version, update.source) != 0;
     markDirty(update.marked);
     markDirty(update.cleared);
     outcome.updates.push_back(std::move(update));
   }
   for (std::uint32_t index : steady_all)
   {
-    cell_flags_[index] = 0;
+    cell_flags_[index] &= ~kSteadyFlag;
   }
   return outcome;
 }
@@ -1079,6 +1078,7 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   }
   obstacle.max_version = std::max(obstacle.max_version, update.version);
   result.changed = obstacle.cells.apply(update.marked, update.cleared, update.version, update.source);
+  shared_flags_stale_ |= result.changed != 0;
   for (std::uint32_t index : update.marked)
   {
     obstacle.free_streaks.erase(index);  // a robot saw it occupied: evidence of free space starts again
@@ -1087,6 +1087,43 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   markDirty(update.cleared);
   result.ok = true;
   return result;
+}
+
+void SharingCore::refreshSharedFlags()
+{
+  if (!shared_flags_stale_)
+  {
+    return;
+  }
+  for (std::uint32_t index : flagged_cells_)
+  {
+    cell_flags_[index] &= ~ScanWatch::kFlaggedWatched;
+  }
+  flagged_cells_.clear();
+  const GridGeometry& g = geometry();
+  for (auto& entry : shared_)
+  {
+    SharedObstacle& obstacle = entry.second;
+    const std::vector<std::uint32_t>& present = obstacle.cells.present();
+    obstacle.present_box = CellRect{ 0, 0, -1, -1 };
+    if (present.empty())
+    {
+      continue;
+    }
+    // Sorted: the first and last cells give the rows.
+    CellRect box{ std::numeric_limits<int>::max(), static_cast<int>(present.front() / g.size_x),
+                  std::numeric_limits<int>::min(), static_cast<int>(present.back() / g.size_x) };
+    for (std::uint32_t index : present)
+    {
+      const int x = static_cast<int>(index % g.size_x);
+      box.min_x = std::min(box.min_x, x);
+      box.max_x = std::max(box.max_x, x);
+      cell_flags_[index] |= ScanWatch::kFlaggedWatched;
+    }
+    flagged_cells_.insert(flagged_cells_.end(), present.begin(), present.end());
+    obstacle.present_box = box;
+  }
+  shared_flags_stale_ = false;
 }
 
 std::vector<std::uint32_t> SharingCore::steadyShareable()
@@ -1099,7 +1136,7 @@ std::vector<std::uint32_t> SharingCore::steadyShareable()
         found->second.time - found->second.marked_since >= params_.clearing_time)
     {
       steady.push_back(index);
-      cell_flags_[index] = 1;
+      cell_flags_[index] |= kSteadyFlag;
     }
   }
   return steady;
@@ -1113,7 +1150,9 @@ bool SharingCore::steadyInRing(const CellRect& r, int gap) const
   for (int y = y0; y <= y1; ++y)
   {
     const std::uint8_t* row = cell_flags_.data() + static_cast<std::size_t>(y) * g.size_x;
-    auto any = [&](int from, int to) { return std::any_of(row + from, row + to + 1, [](std::uint8_t f) { return f != 0; }); };
+    auto any = [&](int from, int to) {
+      return std::any_of(row + from, row + to + 1, [](std::uint8_t f) { return (f & kSteadyFlag) != 0; });
+    };
     if (y < r.min_y || y > r.max_y ? any(x0, x1)
                                    : (x0 <= r.min_x - 1 && any(x0, r.min_x - 1)) || (r.max_x + 1 <= x1 && any(r.max_x + 1, x1)))
     {
@@ -1248,6 +1287,7 @@ bool SharingCore::expire(const std::string& uuid)
   markDirty(found->second.cells.present());
   countRectangle(found->second.rectangle_cells, -1);
   shared_.erase(found);
+  shared_flags_stale_ = true;
   return true;
 }
 
@@ -1362,7 +1402,9 @@ MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observati
   is_shareable_.swap(is_shareable);
   shareable_.swap(shareable);
   monitored_.swap(monitored);
-  cell_flags_.swap(cell_flags);
+  cell_flags_.swap(cell_flags);  // a fresh scratch: every present cell is flagged again at the next scan
+  flagged_cells_.clear();
+  shared_flags_stale_ = true;
   memory_.swap(memory);
   static_costs_.clear();
   unknown_.clear();

@@ -201,6 +201,29 @@ TEST(EvidenceClearing, RemovedBlockIsClearedAfterClearingScansAndTheUpdateShared
   EXPECT_EQ(1u, core.sharedObstacles().count("block"));
 }
 
+TEST(EvidenceClearing, APeersObstacleArrivingBetweenScansIsMonitoredToo)
+{
+  // The robot has scanned before the peer's obstacle arrives, and never marked its cells itself (no trigger memory
+  // of them): only the obstacle's own monitoring can see them free.
+  SimWorld world = walledWorld();
+  block(world);
+  SharingCore peer = makeCore();
+  const std::vector<std::uint32_t> face = shareBlock(peer, world);
+  ASSERT_FALSE(face.empty());
+  const SharedObstacle& shared = peer.sharedObstacles().at("block");
+
+  block(world, 0);
+  SharingCore core = makeCore();
+  const Observation through = world.scan(3.6, 5.0, 0.0);
+  EXPECT_TRUE(core.processScan(through, 1.0).updates.empty());
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", face, shared.rectangle, 1, "robot_1", 600), 1.5).ok);
+  EXPECT_TRUE(core.processScan(through, 2.0).updates.empty());
+  EXPECT_TRUE(core.processScan(through, 2.5).updates.empty());
+  const ScanOutcome outcome = core.processScan(through, 3.0);
+  ASSERT_EQ(1u, outcome.updates.size());
+  EXPECT_EQ(face, outcome.updates[0].cleared);
+}
+
 TEST(EvidenceClearing, TheStreakNeedsClearingScansAndClearingTime)
 {
   SimWorld world = walledWorld();

@@ -91,6 +91,7 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
 {
   std::mt19937 rng(2026);
   std::size_t results = 0;
+  std::size_t flagged_trials = 0;
   for (int trial = 0; trial < 1500; ++trial)
   {
     const unsigned int w = 30 + rng() % 90, h = 30 + rng() % 90;
@@ -172,15 +173,47 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
     }
 
     const Expected expected = oracle(g, obs, limits, watch);
+    // An owner that keeps its watched cells flagged in the scratch instead of listing them gets the same result;
+    // flagged cells outside every region are not watched.
+    std::vector<std::uint8_t> flagged_before;
+    if (!scratch.empty() && with_regions && rng() % 2 == 0)
+    {
+      for (std::uint32_t c : watch.cells)
+      {
+        scratch[c] = ScanWatch::kFlaggedWatched;
+      }
+      watch.cells.clear();
+      for (int i = 0, k = static_cast<int>(rng() % 20); i < k; ++i)
+      {
+        const std::uint32_t c = static_cast<std::uint32_t>(rng() % g.cellCount());
+        unsigned int cx = 0, cy = 0;
+        g.indexToCells(c, cx, cy);
+        if (std::none_of(watch.regions.begin(), watch.regions.end(),
+                         [&](const CellRect& r) { return r.contains(static_cast<int>(cx), static_cast<int>(cy)); }))
+        {
+          scratch[c] = ScanWatch::kFlaggedWatched;
+        }
+      }
+      flagged_before = scratch;
+    }
     const ScanTouch touch = applyScan(grid, obs, limits, watch);
     ASSERT_EQ(expected.cleared, touch.watched_cleared) << "trial " << trial;
     ASSERT_EQ(expected.free, touch.watched_free) << "trial " << trial;
     ASSERT_EQ(expected.hit, touch.watched_hit) << "trial " << trial;
-    ASSERT_TRUE(std::all_of(scratch.begin(), scratch.end(), [](std::uint8_t f) { return f == 0; }))
-        << "trial " << trial << ": the scratch must come back zeroed";
+    if (flagged_before.empty())
+    {
+      ASSERT_TRUE(std::all_of(scratch.begin(), scratch.end(), [](std::uint8_t f) { return f == 0; }))
+          << "trial " << trial << ": the scratch must come back zeroed";
+    }
+    else
+    {
+      ASSERT_EQ(flagged_before, scratch) << "trial " << trial << ": the flagged cells must come back as they were";
+      ++flagged_trials;
+    }
     results += expected.cleared.size() + expected.free.size() + expected.hit.size();
   }
   EXPECT_GT(results, 10000u);  // the trials exercise the rules, not only empty watches
+  EXPECT_GT(flagged_trials, 100u);
 }
 
 TEST(ScanWatch, ScratchOfTheWrongSizeIsRefused)
@@ -201,4 +234,38 @@ TEST(ScanWatch, ScratchOfTheWrongSizeIsRefused)
   watch.scratch = nullptr;
   watch.scratch_size = 0;
   EXPECT_THROW(applyScan(grid, obs, ScanLimits(), watch), std::invalid_argument);
+}
+
+TEST(ScanWatch, AClippedEndpointIsNoHit)
+{
+  // A beam to a point beyond the grid edge is raytraced to the edge cell (as costmap_2d clips it): that cell is
+  // passed and seen free, but holds no endpoint.
+  const GridGeometry g(0.1, 0.0, 0.0, 10, 10);
+  Observation obs;
+  obs.origin = Point3{ 0.05, 0.55, 0.0 };
+  obs.points = { Point3{ 1.5, 0.55, 0.0 }, Point3{ 0.55, 0.95, 0.0 } };
+  ScanLimits limits;
+  limits.raytrace_range = 3.0;
+  const std::uint32_t edge = g.getIndex(9, 5);
+  const std::uint32_t end_in_grid = g.getIndex(5, 9);
+  for (const bool flagged : { false, true })
+  {
+    CostGrid grid(g, FREE_SPACE);
+    std::vector<std::uint8_t> scratch(g.cellCount(), 0);
+    ScanWatch watch;
+    watch.scratch = scratch.data();
+    watch.scratch_size = scratch.size();
+    watch.regions = { CellRect{ 9, 5, 9, 5 }, CellRect{ 5, 9, 5, 9 } };
+    if (flagged)
+    {
+      scratch[edge] = scratch[end_in_grid] = ScanWatch::kFlaggedWatched;
+    }
+    else
+    {
+      watch.cells = { edge, end_in_grid };
+    }
+    const ScanTouch touch = applyScan(grid, obs, limits, watch);
+    EXPECT_EQ(std::vector<std::uint32_t>{ end_in_grid }, touch.watched_hit) << "flagged " << flagged;
+    EXPECT_EQ(std::vector<std::uint32_t>{ edge }, touch.watched_free) << "flagged " << flagged;
+  }
 }

@@ -27,21 +27,27 @@ struct ScanWatch
   /// neighbouring points on each side (observation order = scan order), so beams at an occlusion edge,
   /// which localisation error moves through the cells hidden behind a corner, see nothing free there.
   unsigned int free_neighbours = 0;
-  /// Optional: rectangles that together cover every watched cell (e.g. the obstacles' rectangles). Beams
+  /// Optional: rectangles that together cover every listed cell (e.g. the obstacles' rectangles). Beams
   /// are tested against these instead of against each cell, which is cheaper when they hold many cells.
+  /// Required for cells flagged in the scratch (see scratch): only those inside a region are watched.
   std::vector<CellRect> regions;
   /// Watched as cells, but covered by no region (scattered cells): walked one by one, and only when this scan
   /// did not mark them again.
   std::vector<std::uint32_t> loose_cells;
-  /// Optional: a per-cell scratch array of the grid's size, all zero, which the scan leaves all zero. Without
-  /// it a watching scan allocates one per call (as large as the grid).
+  /// Optional: a per-cell scratch array of the grid's size, which the scan leaves as it found it. Without it a
+  /// watching scan allocates one per call (as large as the grid). Its cells must be zero, except that a cell may
+  /// hold kFlaggedWatched: such a cell is watched without being listed, when it lies in one of the regions (an
+  /// owner that keeps its watched cells flagged between scans does not list them in every scan). Other bits are
+  /// the scan's own.
   std::uint8_t* scratch = nullptr;
   std::size_t scratch_size = 0;
+  static constexpr std::uint8_t kFlaggedWatched = 1;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);
 
-  bool empty() const { return cells.empty() && loose_cells.empty(); }
+  /// @return whether nothing is watched: no cell listed, and no region for flagged cells
+  bool empty() const { return cells.empty() && loose_cells.empty() && (regions.empty() || scratch == nullptr); }
 };
 
 /**

@@ -106,6 +106,7 @@ struct SharedObstacle
   std::uint64_t max_version = 0; ///< highest version seen
   double last_observation = 0.0; ///< local time of the last update with marked cells (any robot's), or arrival
   VersionedCellSet cells;
+  CellRect present_box{ 0, 0, -1, -1 };  ///< bounding box of the present cells (kept by SharingCore; empty: none)
   /// Per present cell: this robot's current streak of evidence of free space (local monitoring state,
   /// never sent).
   std::unordered_map<std::uint32_t, FreeStreak> free_streaks;

@@ -326,6 +326,9 @@ private:
   std::vector<std::uint32_t> steadyShareable();
   /// @return whether a flagged steady cell lies within gap cells around the rectangle, outside it
   bool steadyInRing(const CellRect& rect, int gap) const;
+  /// @brief Flags every present shared cell in cell_flags_ (ScanWatch::kFlaggedWatched) and sets each obstacle's
+  /// present_box, when the present cells changed since the last call (shared_flags_stale_).
+  void refreshSharedFlags();
   /// @brief Cells inside a new or grown rectangle stop being this robot's candidates: monitoring has them.
   void dropShareableInside(const CellRect& rect);
 
@@ -347,9 +350,13 @@ private:
   std::vector<std::uint32_t> shareable_;
   std::vector<std::uint8_t> is_shareable_;
   std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
-  /// Per-cell scratch, all zero between uses: applyScan's watch flags, then the current scan's growth
-  /// candidates (steadyShareable) until processScan resets them.
+  /// Per-cell flags: ScanWatch::kFlaggedWatched on every present shared cell (kept between scans, so a scan
+  /// does not list them: refreshSharedFlags), applyScan's own bits during a scan, and kSteadyFlag on the current
+  /// scan's growth candidates (steadyShareable) until processScan resets them.
   std::vector<std::uint8_t> cell_flags_;
+  static constexpr std::uint8_t kSteadyFlag = 0x80;
+  std::vector<std::uint32_t> flagged_cells_;  ///< cells flagged kFlaggedWatched
+  bool shared_flags_stale_ = true;            ///< present shared cells changed since refreshSharedFlags
   std::map<std::string, SharedObstacle> shared_;
   WorldBounds dirty_;
   FleetRobots fleet_robots_;  ///< fleet robots' footprints: never shared
