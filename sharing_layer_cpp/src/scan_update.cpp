@@ -191,13 +191,21 @@ public:
     {
       buildBuckets();
     }
+    // The beams of a run of buckets lie side by side in sorted order: tested together (vectorised), then visited.
     const auto visit_range = [&](double lo, double hi) {
-      for (std::uint32_t k = s_.start[bucketOf(lo)]; k < s_.start[bucketOf(hi) + 1]; ++k)
+      const std::uint32_t from = s_.start[bucketOf(lo)], to = s_.start[bucketOf(hi) + 1];
+      const float* sorted_dx = s_.sorted_dx.data();
+      const float* sorted_dy = s_.sorted_dy.data();
+      std::uint8_t* pass = s_.pass.data();
+      for (std::uint32_t k = from; k < to; ++k)
       {
-        const std::uint32_t i = s_.order[k];
-        if (state[i] != kNone && w.admits(dx[i], dy[i]))
+        pass[k] = w.admits(sorted_dx[k], sorted_dy[k]);
+      }
+      for (std::uint32_t k = from; k < to; ++k)
+      {
+        if (pass[k])
         {
-          visitBeam(i, f);
+          visitBeam(s_.order[k], f);
         }
       }
     };
@@ -285,11 +293,18 @@ private:
     {
       s_.start[b] += s_.start[b - 1];
     }
-    // Bucket b's entries are placed from start[b + 1] on, which then ends where bucket b + 1 begins.
+    // Bucket b's entries are placed from start[b + 1] on, which then ends where bucket b + 1 begins. Points
+    // without a beam get a NaN direction, which no wedge admits.
     s_.order.resize(n);
+    s_.sorted_dx.resize(n);
+    s_.sorted_dy.resize(n);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
     for (std::uint32_t i = 0; i < n; ++i)
     {
-      s_.order[s_.start[bucket_of[i] + 1]++] = i;
+      const std::uint32_t k = s_.start[bucket_of[i] + 1]++;
+      s_.order[k] = i;
+      s_.sorted_dx[k] = state_[i] != kNone ? dx[i] : nan;
+      s_.sorted_dy[k] = state_[i] != kNone ? dy[i] : nan;
     }
     bucketed_ = true;
   }
@@ -323,6 +338,7 @@ private:
     std::vector<std::uint16_t> bucket_of;
     std::vector<std::uint32_t> start;  ///< see buildBuckets
     std::vector<std::uint32_t> order;  ///< beam indexes by bucket
+    std::vector<float> sorted_dx, sorted_dy;  ///< their directions in that order
   };
   static Storage& storage()
   {
@@ -580,7 +596,6 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
         seen_cells.push_back(index);
       }
       flags[index] |= kHit;
-      touch.watched_hit.push_back(index);
     }
     if (in_range)
     {
@@ -643,7 +658,6 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
               seen_cells.push_back(end);
             }
             flags[end] |= kHit;
-            touch.watched_hit.push_back(end);
           }
         }
         const LineSteps& line = beam.line;
@@ -751,12 +765,17 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   }
   sortUnique(touch.marked);
 
-  // Read the flags back and leave the scratch as it was. A visited cell that is lethal now was marked again by
-  // this scan: not seen free, as costmap_2d keeps it.
+  // Read the flags back, in index order (so the lists come out sorted), and leave the scratch as it was. A
+  // visited cell that is lethal now was marked again by this scan: not seen free, as costmap_2d keeps it.
+  std::sort(seen_cells.begin(), seen_cells.end());  // unique: a cell is added when it first gets a bit
   for (std::uint32_t index : seen_cells)
   {
     const std::uint8_t f = flags[index];
     flags[index] = f & ~kSeen;
+    if (f & kHit)
+    {
+      touch.watched_hit.push_back(index);
+    }
     if (!(f & (kVisitedDeep | kVisitedShallow)) || costs[index] == LETHAL_OBSTACLE)
     {
       continue;  // only hit, or marked again
@@ -777,9 +796,6 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       }
     }
   }
-  sortUnique(touch.watched_hit);
-  sortUnique(touch.watched_free);
-  sortUnique(touch.watched_cleared);
   return touch;
 }
 
