@@ -54,6 +54,8 @@ constexpr std::uint8_t kVisitedDeep = 2;     ///< a beam passed with its endpoin
 constexpr std::uint8_t kVisitedShallow = 4;  ///< a beam passed with its endpoint closer
 constexpr std::uint8_t kHit = 8;             ///< an endpoint of this scan lies in the cell
 constexpr std::uint8_t kListed = 16;         ///< listed in the watch for this scan
+static_assert(((kFlagged | kVisitedDeep | kVisitedShallow | kHit | kListed) & ScanWatch::kOwnerBits) == 0,
+              "the scan's bits must leave the owner's alone");
 constexpr std::uint8_t kWatched = kFlagged | kListed;
 constexpr std::uint8_t kSeen = kVisitedDeep | kVisitedShallow | kHit;  ///< this scan's evidence
 
@@ -96,11 +98,15 @@ public:
   {
     if (s_.dx.size() < points)
     {
+      s_.end_x.resize(points);
+      s_.end_y.resize(points);
       s_.dx.resize(points);
       s_.dy.resize(points);
       s_.pass.resize(points);
     }
     s_.state.assign(points, kNone);
+    end_x_ = s_.end_x.data();
+    end_y_ = s_.end_y.data();
     dx_ = s_.dx.data();
     dy_ = s_.dy.data();
     state_ = s_.state.data();
@@ -109,9 +115,8 @@ public:
   /// The beam of point `point` ends in cell (x1, y1); clipped: the point lies off the grid, (x1, y1) on its edge.
   void add(std::size_t point, unsigned int x1, unsigned int y1, bool clipped)
   {
-    // Single precision holds any cell offset of a grid below 2^24 cells a side exactly.
-    dx_[point] = static_cast<float>(static_cast<std::int32_t>(x1) - static_cast<std::int32_t>(x0_));
-    dy_[point] = static_cast<float>(static_cast<std::int32_t>(y1) - static_cast<std::int32_t>(y0_));
+    end_x_[point] = x1;  // (raytracing's inner loop: as little as possible here)
+    end_y_[point] = y1;
     state_[point] = clipped ? kClipped : kEndsInPoint;
   }
 
@@ -253,6 +258,18 @@ private:
     {
       s_.beams.resize(n_);  // a beam is filled when first reached in a scan
     }
+    // Directions in single precision, which holds any cell offset of a grid below 2^24 cells a side exactly.
+    const std::uint32_t n = n_;
+    const std::uint32_t* end_x = end_x_;
+    const std::uint32_t* end_y = end_y_;
+    float* dx = dx_;
+    float* dy = dy_;
+    const float x0 = static_cast<float>(x0_), y0 = static_cast<float>(y0_);
+    for (std::uint32_t i = 0; i < n; ++i)
+    {
+      dx[i] = static_cast<float>(static_cast<std::int32_t>(end_x[i])) - x0;
+      dy[i] = static_cast<float>(static_cast<std::int32_t>(end_y[i])) - y0;
+    }
     if (++s_.scan == 0)  // wrapped: stamps of old scans could match again
     {
       for (Beam& beam : s_.beams)
@@ -316,8 +333,8 @@ private:
     if (beam.scan != s_.scan)
     {
       beam.scan = s_.scan;
-      beam.end_x = static_cast<unsigned int>(static_cast<int>(x0_) + static_cast<int>(dx_[i]));
-      beam.end_y = static_cast<unsigned int>(static_cast<int>(y0_) + static_cast<int>(dy_[i]));
+      beam.end_x = end_x_[i];
+      beam.end_y = end_y_[i];
       beam.line = lineSteps(x0_, y0_, beam.end_x, beam.end_y, max_length_);  // as raytraced
       beam.point = i;
       beam.deep_steps = kUnset;
@@ -331,7 +348,8 @@ private:
   struct Storage
   {
     std::vector<std::uint8_t> state;         ///< per point: kNone, kEndsInPoint or kClipped
-    std::vector<float> dx, dy;               ///< per point with a beam: end cell minus origin cell
+    std::vector<std::uint32_t> end_x, end_y;  ///< per point with a beam: its end cell
+    std::vector<float> dx, dy;               ///< the same minus the origin cell (filled when first asked)
     std::vector<std::uint8_t> pass;          ///< wedge test of every beam
     std::vector<Beam> beams;
     std::uint32_t scan = 0;  ///< stamp of the current scan: a beam with another stamp is not filled yet
@@ -349,6 +367,8 @@ private:
   unsigned int x0_, y0_, max_length_;
   std::uint32_t n_;
   Storage& s_;
+  std::uint32_t* end_x_;
+  std::uint32_t* end_y_;
   float* dx_;
   float* dy_;
   std::uint8_t* state_;

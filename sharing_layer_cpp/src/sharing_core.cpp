@@ -202,7 +202,15 @@ void SharingCore::dropStaticCandidates()
                    shareable_.end());
   for (auto it = memory_.begin(); it != memory_.end();)
   {
-    it = static_filter_.isStatic(it->first) ? memory_.erase(it) : std::next(it);
+    if (static_filter_.isStatic(it->first))
+    {
+      cell_flags_[it->first] &= ~kRememberedFlag;
+      it = memory_.erase(it);
+    }
+    else
+    {
+      ++it;
+    }
   }
 }
 
@@ -242,15 +250,18 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   refreshSharedFlags();
   if (origin_finite)
   {
-    for (auto& entry : shared_)
+    refreshViewIndex();
+    const double radius_sq = view_radius * view_radius;
+    for (const ViewEntry& entry : view_index_)  // contiguous: no walk through the map's nodes
     {
-      SharedObstacle& obstacle = entry.second;
-      if (!obstacle.rectangle_cells.empty() && obstacle.rectangle.withinRadius(ox, oy, view_radius))
+      const double dx = std::max({ entry.min_x - ox, 0.0, ox - entry.max_x });
+      const double dy = std::max({ entry.min_y - oy, 0.0, oy - entry.max_y });
+      if (dx * dx + dy * dy <= radius_sq)  // Subsection::withinRadius
       {
-        in_view.push_back(&obstacle);
-        if (!obstacle.present_box.empty())
+        in_view.push_back(entry.obstacle);
+        if (!entry.obstacle->present_box.empty())
         {
-          watch.regions.push_back(obstacle.present_box);
+          watch.regions.push_back(entry.obstacle->present_box);
         }
       }
     }
@@ -263,6 +274,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       const double age = now_s - it->second.time;
       if (!(age <= params_.trigger_memory) || age < 0.0)  // forgotten, or time went backwards (a restart)
       {
+        cell_flags_[it->first] &= ~kRememberedFlag;
         it = memory_.erase(it);
         continue;
       }
@@ -332,7 +344,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
                         t.watched_free.end(), std::back_inserter(grazed));
     for (std::uint32_t index : t.marked)
     {
-      if (monitored_[index] != 0 || memory_.count(index) != 0)
+      if (monitored_[index] != 0 || (cell_flags_[index] & kRememberedFlag))
       {
         marked_known.push_back(index);
       }
@@ -492,9 +504,10 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   }
   // Remembered cells leave on the same evidence as shared ones, not on costmap clearing: a robot backing off
   // clears a block's face with beams that end on it past obstacle_range.
+  // (The flag says which cells are remembered without a lookup: most watched cells are shared ones.)
   for (std::uint32_t index : occupied)
   {
-    auto found = memory_.find(index);
+    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
     if (found != memory_.end())
     {
       found->second.free.reset();
@@ -502,15 +515,19 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   }
   for (std::uint32_t index : touch.watched_free)
   {
-    auto found = memory_.find(index);
-    if (found != memory_.end() && found->second.free.add(now_s, params_.clearing_scans, params_.clearing_time))
+    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
+    if (found != memory_.end())
     {
-      memory_.erase(found);
+      if (found->second.free.add(now_s, params_.clearing_scans, params_.clearing_time))
+      {
+        cell_flags_[index] &= ~kRememberedFlag;
+        memory_.erase(found);
+      }
     }
   }
   for (std::uint32_t index : touch.watched_cleared)
   {
-    auto found = memory_.find(index);
+    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
     if (found != memory_.end())
     {
       found->second.marks = 0;  // a beam passed through it: not marked steadily
@@ -524,6 +541,7 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
     if (!static_filter_.isStatic(index) && !fleet_robots_.excludes(index))
     {
       RememberedCell& cell = memory_[index];
+      cell_flags_[index] |= kRememberedFlag;
       if (cell.marks == 0)
       {
         cell.marked_since = now_s;
@@ -1067,6 +1085,7 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
     obstacle.last_observation = now_s;
     found = shared_.emplace(update.uuid, std::move(obstacle)).first;
     result.added = true;
+    view_index_stale_ = true;
     countRectangle(found->second.rectangle_cells, +1);
     dropShareableInside(found->second.rectangle_cells);
   }
@@ -1089,8 +1108,29 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
   return result;
 }
 
+void SharingCore::refreshViewIndex()
+{
+  if (!view_index_stale_)
+  {
+    return;
+  }
+  view_index_.clear();
+  for (auto& entry : shared_)
+  {
+    SharedObstacle& obstacle = entry.second;
+    if (!obstacle.rectangle_cells.empty())
+    {
+      const Subsection& r = obstacle.rectangle;
+      view_index_.push_back(ViewEntry{ r.min_x, r.min_y, r.max_x, r.max_y, &obstacle });
+    }
+  }
+  view_index_stale_ = false;
+}
+
 void SharingCore::refreshSharedFlags()
 {
+  static_assert(((kSteadyFlag | kRememberedFlag) & ~ScanWatch::kOwnerBits) == 0,
+                "the core's own cell flags must be owner bits of the scan's scratch");
   if (!shared_flags_stale_)
   {
     return;
@@ -1131,7 +1171,7 @@ std::vector<std::uint32_t> SharingCore::steadyShareable()
   std::vector<std::uint32_t> steady;
   for (std::uint32_t index : shareable_)
   {
-    const auto found = memory_.find(index);
+    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
     if (found != memory_.end() && found->second.marks >= params_.clearing_scans &&
         found->second.time - found->second.marked_since >= params_.clearing_time)
     {
@@ -1258,6 +1298,7 @@ void SharingCore::growRectangle(SharedObstacle& obstacle, const Subsection& rect
   obstacle.rectangle_cells = obstacle.rectangle.cells(geometry());
   countRectangle(obstacle.rectangle_cells, +1);
   dropShareableInside(obstacle.rectangle_cells);
+  view_index_stale_ = true;
 }
 
 void SharingCore::dropShareableInside(const CellRect& rect)
@@ -1288,6 +1329,7 @@ bool SharingCore::expire(const std::string& uuid)
   countRectangle(found->second.rectangle_cells, -1);
   shared_.erase(found);
   shared_flags_stale_ = true;
+  view_index_stale_ = true;
   return true;
 }
 
@@ -1405,7 +1447,12 @@ MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observati
   cell_flags_.swap(cell_flags);  // a fresh scratch: every present cell is flagged again at the next scan
   flagged_cells_.clear();
   shared_flags_stale_ = true;
+  view_index_stale_ = true;
   memory_.swap(memory);
+  for (const auto& entry : memory_)
+  {
+    cell_flags_[entry.first] |= kRememberedFlag;
+  }
   static_costs_.clear();
   unknown_.clear();
   static_filter_ = StaticMapFilter();
@@ -1452,6 +1499,10 @@ void SharingCore::resetObstacleLayer()
   shareable_.clear();
   // What the robot saw before the reset is forgotten with it (the trigger memory and the plan trigger's
   // newly marked cells); shared obstacles and their monitoring state stay.
+  for (const auto& entry : memory_)
+  {
+    cell_flags_[entry.first] &= ~kRememberedFlag;
+  }
   memory_.clear();
   last_new_marked_.clear();
   last_far_hits_.clear();

@@ -194,6 +194,10 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
           scratch[c] = ScanWatch::kFlaggedWatched;
         }
       }
+      for (int i = 0, k = static_cast<int>(rng() % 40); i < k; ++i)  // the owner's bits: neither read nor changed
+      {
+        scratch[rng() % g.cellCount()] |= static_cast<std::uint8_t>(rng() % 8) << 5;
+      }
       flagged_before = scratch;
     }
     const ScanTouch touch = applyScan(grid, obs, limits, watch);

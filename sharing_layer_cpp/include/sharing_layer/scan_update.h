@@ -35,13 +35,14 @@ struct ScanWatch
   /// did not mark them again.
   std::vector<std::uint32_t> loose_cells;
   /// Optional: a per-cell scratch array of the grid's size, which the scan leaves as it found it. Without it a
-  /// watching scan allocates one per call (as large as the grid). Its cells must be zero, except that a cell may
-  /// hold kFlaggedWatched: such a cell is watched without being listed, when it lies in one of the regions (an
-  /// owner that keeps its watched cells flagged between scans does not list them in every scan). Other bits are
-  /// the scan's own.
+  /// watching scan allocates one per call (as large as the grid). A cell may hold kFlaggedWatched: it is then
+  /// watched without being listed, when it lies in one of the regions (an owner that keeps its watched cells
+  /// flagged between scans does not list them in every scan). kOwnerBits are the owner's: the scan neither reads
+  /// nor changes them. The other bits must be zero.
   std::uint8_t* scratch = nullptr;
   std::size_t scratch_size = 0;
-  static constexpr std::uint8_t kFlaggedWatched = 1;
+  static constexpr std::uint8_t kFlaggedWatched = 0x01;
+  static constexpr std::uint8_t kOwnerBits = 0xE0;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);

@@ -326,6 +326,8 @@ private:
   std::vector<std::uint32_t> steadyShareable();
   /// @return whether a flagged steady cell lies within gap cells around the rectangle, outside it
   bool steadyInRing(const CellRect& rect, int gap) const;
+  /// @brief Rebuilds view_index_ when obstacles came, went or grew (view_index_stale_).
+  void refreshViewIndex();
   /// @brief Flags every present shared cell in cell_flags_ (ScanWatch::kFlaggedWatched) and sets each obstacle's
   /// present_box, when the present cells changed since the last call (shared_flags_stale_).
   void refreshSharedFlags();
@@ -351,13 +353,23 @@ private:
   std::vector<std::uint8_t> is_shareable_;
   std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
   /// Per-cell flags: ScanWatch::kFlaggedWatched on every present shared cell (kept between scans, so a scan
-  /// does not list them: refreshSharedFlags), applyScan's own bits during a scan, and kSteadyFlag on the current
-  /// scan's growth candidates (steadyShareable) until processScan resets them.
+  /// does not list them: refreshSharedFlags), applyScan's own bits during a scan, kRememberedFlag on the cells of
+  /// memory_, and kSteadyFlag on the current scan's growth candidates (steadyShareable) until processScan resets
+  /// them.
   std::vector<std::uint8_t> cell_flags_;
   static constexpr std::uint8_t kSteadyFlag = 0x80;
+  static constexpr std::uint8_t kRememberedFlag = 0x40;  ///< the cell is in memory_ (kept with it)
   std::vector<std::uint32_t> flagged_cells_;  ///< cells flagged kFlaggedWatched
   bool shared_flags_stale_ = true;            ///< present shared cells changed since refreshSharedFlags
   std::map<std::string, SharedObstacle> shared_;
+  /// The shared obstacles with cells on the grid and their rectangles, side by side: the in-view test of every scan.
+  struct ViewEntry
+  {
+    double min_x, min_y, max_x, max_y;
+    SharedObstacle* obstacle;
+  };
+  std::vector<ViewEntry> view_index_;
+  bool view_index_stale_ = true;
   WorldBounds dirty_;
   FleetRobots fleet_robots_;  ///< fleet robots' footprints: never shared
   std::vector<std::uint32_t> last_robot_marked_;  ///< non-static cells the last scan marked on fleet robots
