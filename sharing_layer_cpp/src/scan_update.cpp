@@ -386,6 +386,19 @@ bool inRegion(const std::vector<CellRect>& regions, unsigned int x, unsigned int
   });
 }
 
+/// A scan's temporaries, kept from scan to scan (per thread) so that a scan does not allocate them again.
+struct ScanScratch
+{
+  std::vector<std::uint32_t> seen_cells;
+  std::vector<double> range_sq;
+};
+
+ScanScratch& scanScratch()
+{
+  thread_local ScanScratch scratch;
+  return scratch;
+}
+
 void sortUnique(std::vector<std::uint32_t>& cells)
 {
   std::sort(cells.begin(), cells.end());
@@ -459,7 +472,10 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     }
   }
   // Watched cells given evidence by this scan, each once: the cells to read back and reset.
-  std::vector<std::uint32_t> seen_cells;
+  ScanScratch& scan_scratch = scanScratch();
+  std::vector<std::uint32_t>& seen_cells = scan_scratch.seen_cells;
+  seen_cells.clear();
+  touch.marked.reserve(observation.points.size());
 
   // Clearing, exactly as without a watch; the beams that reach a watched cell are walked again below.
   const double ox = observation.origin.x;
@@ -631,7 +647,8 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   if (watching && clearing)
   {
     // Each point's planar range squared (+inf when not finite; -1 until a beam needs it).
-    std::vector<double> range_sq;
+    std::vector<double>& range_sq = scan_scratch.range_sq;
+    range_sq.clear();
     const std::size_t n = observation.points.size();
     const auto point_range_sq = [&](std::size_t j) {
       if (range_sq.empty())
@@ -788,6 +805,9 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   // Read the flags back, in index order (so the lists come out sorted), and leave the scratch as it was. A
   // visited cell that is lethal now was marked again by this scan: not seen free, as costmap_2d keeps it.
   std::sort(seen_cells.begin(), seen_cells.end());  // unique: a cell is added when it first gets a bit
+  touch.watched_hit.reserve(seen_cells.size());
+  touch.watched_cleared.reserve(seen_cells.size());
+  touch.watched_free.reserve(seen_cells.size());
   for (std::uint32_t index : seen_cells)
   {
     const std::uint8_t f = flags[index];

@@ -239,8 +239,13 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
 
   // Only obstacles this scan can reach are monitored; the rest cost one distance test each. Their present
   // cells and the remembered cells in reach are watched for evidence of free space.
-  std::vector<SharedObstacle*> in_view;
-  ScanWatch watch;
+  // (The temporaries of a scan live in buffers_, so that a scan does not allocate them again.)
+  std::vector<SharedObstacle*>& in_view = buffers_.in_view;
+  in_view.clear();
+  ScanWatch& watch = buffers_.watch;
+  watch.cells.clear();
+  watch.regions.clear();
+  watch.loose_cells.clear();
   watch.free_margin = params_.clearing_margin;
   watch.free_neighbours = params_.clearing_neighbours;
   watch.scratch = cell_flags_.data();
@@ -297,7 +302,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   // Cells this scan will mark that are not lethal now: the "newly marked" cells of the plan trigger. Also the
   // endpoints between obstacle_range and raytrace_range: the rest of a face whose middle the plan trigger fires
   // on (see checkPlan).
-  std::vector<std::uint32_t> not_lethal_before;
+  std::vector<std::uint32_t>& not_lethal_before = buffers_.not_lethal_before;
+  not_lethal_before.clear();
   last_far_hits_.clear();
   if (!plan_.empty() && limits.marking)  // a source that does not mark makes nothing new
   {
@@ -335,11 +341,15 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   trackShareable(outcome.touch, observation, limits.obstacle_range);
   // Signs of occupancy among the watched cells: marked, an endpoint in it beyond obstacle_range, or cleared
   // by a beam that ended close behind it (the face it hit, or a neighbour it grazed).
-  std::vector<std::uint32_t> occupied;
+  std::vector<std::uint32_t>& occupied = buffers_.occupied;
+  occupied.clear();
   {
     // Every list is sorted: merged, not sorted again.
     const ScanTouch& t = outcome.touch;
-    std::vector<std::uint32_t> grazed, marked_known;
+    std::vector<std::uint32_t>& grazed = buffers_.grazed;
+    std::vector<std::uint32_t>& marked_known = buffers_.marked_known;
+    grazed.clear();
+    marked_known.clear();
     std::set_difference(t.watched_cleared.begin(), t.watched_cleared.end(), t.watched_free.begin(),
                         t.watched_free.end(), std::back_inserter(grazed));
     for (std::uint32_t index : t.marked)
@@ -349,7 +359,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
         marked_known.push_back(index);
       }
     }
-    std::vector<std::uint32_t> signs;
+    std::vector<std::uint32_t>& signs = buffers_.signs;
+    signs.clear();
     std::set_union(grazed.begin(), grazed.end(), t.watched_hit.begin(), t.watched_hit.end(), std::back_inserter(signs));
     std::set_union(signs.begin(), signs.end(), marked_known.begin(), marked_known.end(), std::back_inserter(occupied));
   }
@@ -385,7 +396,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   {
     return outcome;
   }
-  std::vector<std::uint32_t> marked_watched;
+  std::vector<std::uint32_t>& marked_watched = buffers_.marked_watched;
+  marked_watched.clear();
   for (std::uint32_t index : outcome.touch.marked)
   {
     if (monitored_[index] != 0)
@@ -394,9 +406,11 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
     }
   }
   const std::vector<std::uint32_t>& seen_free = outcome.touch.watched_free;
-  std::vector<std::uint32_t> seen_again;  // present cells this scan marked: an observation of the obstacle
-  std::vector<std::uint32_t> steady = steadyShareable();  // growth candidates, computed once per scan
-  const std::vector<std::uint32_t> steady_all = steady;   // to reset their flags
+  std::vector<std::uint32_t>& seen_again = buffers_.seen_again;  // present cells this scan marked: an observation
+  std::vector<std::uint32_t>& steady = buffers_.steady;
+  steadyShareable(steady);  // growth candidates, computed once per scan
+  std::vector<std::uint32_t>& steady_all = buffers_.steady_all;  // to reset their flags
+  steady_all.assign(steady.begin(), steady.end());
   // Growth candidates lie within obstacle_range of the robot, most obstacles in view far beyond: their box
   // rules those out without looking at their rings.
   CellRect steady_box{ std::numeric_limits<int>::max(), std::numeric_limits<int>::max(),
@@ -422,7 +436,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       }
     }
   };
-  std::vector<std::uint32_t> marked, cleared;  // of one obstacle; most obstacles in view get neither
+  std::vector<std::uint32_t>& marked = buffers_.marked;  // of one obstacle; most obstacles in view get neither
+  std::vector<std::uint32_t>& cleared = buffers_.cleared;
   for (SharedObstacle* obstacle : in_view)
   {
     const CellRect& r = obstacle->rectangle_cells;
@@ -1166,9 +1181,9 @@ void SharingCore::refreshSharedFlags()
   shared_flags_stale_ = false;
 }
 
-std::vector<std::uint32_t> SharingCore::steadyShareable()
+void SharingCore::steadyShareable(std::vector<std::uint32_t>& steady)
 {
-  std::vector<std::uint32_t> steady;
+  steady.clear();
   for (std::uint32_t index : shareable_)
   {
     const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
@@ -1179,7 +1194,6 @@ std::vector<std::uint32_t> SharingCore::steadyShareable()
       cell_flags_[index] |= kSteadyFlag;
     }
   }
-  return steady;
 }
 
 bool SharingCore::steadyInRing(const CellRect& r, int gap) const

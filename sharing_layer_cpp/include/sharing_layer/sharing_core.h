@@ -12,6 +12,7 @@
 #include "sharing_layer/fleet_robots.h"
 #include "sharing_layer/observation.h"
 #include "sharing_layer/proposals.h"
+#include "sharing_layer/scan_update.h"
 #include "sharing_layer/shared_obstacle.h"
 #include "sharing_layer/static_filter.h"
 #include "sharing_layer/trigger.h"
@@ -321,9 +322,9 @@ private:
   /// whole in the fleet as the robot sees more of it, instead of its rest waiting for a trigger that may
   /// never come (navfn's detour no longer runs into it).
   void growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& steady, std::vector<std::uint32_t>& marked);
-  /// @brief Shareable cells marked steadily (the candidates of growInto; those it takes leave the list); also
-  /// flags them in cell_flags_, which processScan resets.
-  std::vector<std::uint32_t> steadyShareable();
+  /// @brief Shareable cells marked steadily (the candidates of growInto; those it takes leave the list), into
+  /// `steady`; also flags them in cell_flags_, which processScan resets.
+  void steadyShareable(std::vector<std::uint32_t>& steady);
   /// @return whether a flagged steady cell lies within gap cells around the rectangle, outside it
   bool steadyInRing(const CellRect& rect, int gap) const;
   /// @brief Rebuilds view_index_ when obstacles came, went or grew (view_index_stale_).
@@ -370,6 +371,16 @@ private:
   };
   std::vector<ViewEntry> view_index_;
   bool view_index_stale_ = true;
+  /// A scan's temporaries, kept so that a scan does not allocate them again (their contents mean nothing between
+  /// scans).
+  struct ScanBuffers
+  {
+    std::vector<SharedObstacle*> in_view;
+    ScanWatch watch;
+    std::vector<std::uint32_t> not_lethal_before, grazed, marked_known, signs, occupied, marked_watched, seen_again,
+        steady, steady_all, marked, cleared;
+  };
+  ScanBuffers buffers_;
   WorldBounds dirty_;
   FleetRobots fleet_robots_;  ///< fleet robots' footprints: never shared
   std::vector<std::uint32_t> last_robot_marked_;  ///< non-static cells the last scan marked on fleet robots
