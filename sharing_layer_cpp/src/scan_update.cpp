@@ -805,9 +805,14 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   // Read the flags back, in index order (so the lists come out sorted), and leave the scratch as it was. A
   // visited cell that is lethal now was marked again by this scan: not seen free, as costmap_2d keeps it.
   std::sort(seen_cells.begin(), seen_cells.end());  // unique: a cell is added when it first gets a bit
-  touch.watched_hit.reserve(seen_cells.size());
-  touch.watched_cleared.reserve(seen_cells.size());
-  touch.watched_free.reserve(seen_cells.size());
+  std::size_t hits = 0, passed = 0;  // sizes first: one allocation per list, none for an empty one
+  for (std::uint32_t index : seen_cells)
+  {
+    hits += (flags[index] & kHit) != 0;
+    passed += (flags[index] & (kVisitedDeep | kVisitedShallow)) != 0;
+  }
+  touch.watched_hit.reserve(hits);
+  touch.watched_cleared.reserve(passed);
   for (std::uint32_t index : seen_cells)
   {
     const std::uint8_t f = flags[index];

@@ -56,10 +56,14 @@ struct LineSteps
   /// @return how many times the line has moved along b after i steps (bresenham2D's error term, closed form)
   unsigned int carries(unsigned int i) const
   {
-    return abs_da == 0 ? 0u
-                       : static_cast<unsigned int>((static_cast<std::uint64_t>(abs_da / 2) +
-                                                    static_cast<std::uint64_t>(i) * abs_db) /
-                                                   abs_da);
+    if (abs_da == 0)
+    {
+      return 0u;
+    }
+    const std::uint64_t numerator = static_cast<std::uint64_t>(abs_da / 2) + static_cast<std::uint64_t>(i) * abs_db;
+    // (a 32-bit division where it fits, as it does on any grid below 65536 cells a side: several times faster)
+    return numerator <= UINT32_MAX ? static_cast<std::uint32_t>(numerator) / abs_da
+                                   : static_cast<unsigned int>(numerator / abs_da);
   }
 };
 
@@ -77,9 +81,17 @@ inline LineSteps lineSteps(unsigned int x0, unsigned int y0, unsigned int x1, un
   line.sign_a = signOf(line.x_major ? dx : dy);
   line.sign_b = signOf(line.x_major ? dy : dx);
   // sqrt of the sum of squares rather than hypot: exact for these integer offsets, at a fraction of the cost
-  line.dist = std::sqrt(static_cast<double>(dx) * dx + static_cast<double>(dy) * dy);
-  const double scale = (line.dist == 0.0) ? 1.0 : std::min(1.0, max_length / line.dist);
-  line.end = std::min(static_cast<unsigned int>(scale * line.abs_da), line.abs_da);
+  const double dist_sq = static_cast<double>(dx) * dx + static_cast<double>(dy) * dy;
+  line.dist = std::sqrt(dist_sq);
+  if (dist_sq <= static_cast<double>(max_length) * max_length)
+  {
+    line.end = line.abs_da;  // scale 1 below: no division for a line within max_length
+  }
+  else
+  {
+    const double scale = (line.dist == 0.0) ? 1.0 : std::min(1.0, max_length / line.dist);
+    line.end = std::min(static_cast<unsigned int>(scale * line.abs_da), line.abs_da);
+  }
   return line;
 }
 
