@@ -225,6 +225,33 @@ GridGeometry SharingLayer::masterGeometry() const
                       master->getSizeInCellsX(), master->getSizeInCellsY());
 }
 
+bool SharingLayer::sharesGridWithCore()
+{
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  return core_ && core_->obstacleGrid().data() == costmap_;
+}
+
+bool SharingLayer::gridMatchesCore() const
+{
+  const GridGeometry& g = core_->geometry();
+  return costmap_ != nullptr && getSizeInCellsX() == g.size_x && getSizeInCellsY() == g.size_y;
+}
+
+void SharingLayer::shareGridWithCore()
+{
+  // One obstacle grid: the core clears and marks this layer's own costmap_ (no second grid, no copy per cycle).
+  if (gridMatchesCore())
+  {
+    core_->useObstacleGrid(costmap_, default_value_);
+  }
+  else
+  {
+    ROS_WARN("SharingLayer (%s): the layer's grid (%ux%u) differs from the master's (%s); the core keeps a grid of "
+             "its own until the next resize",
+             params_.robot_name.c_str(), getSizeInCellsX(), getSizeInCellsY(), core_->geometry().describe().c_str());
+  }
+}
+
 void SharingLayer::rebuildCore()
 {
   std::lock_guard<std::mutex> lock(core_mutex_);
@@ -234,6 +261,7 @@ void SharingLayer::rebuildCore()
     return;  // the static layer has no map yet; matchSize() calls again
   }
   core_.reset(new SharingCore(masterGeometry(), params_));
+  shareGridWithCore();
   core_->fleetRobots().setParams(fleet_params_);
   applyUnknownMap();
   applyFleetRobots();
@@ -254,7 +282,10 @@ void SharingLayer::matchSize()
       // A new map (size, resolution or origin): shared obstacles stay where they are in the world. The layer's
       // own grid starts empty, as ObstacleLayer's does after resizeMap.
       const GridGeometry geometry = masterGeometry();
-      const MoveReport report = core_->moveTo(geometry, false);
+      // ObstacleLayer::matchSize() has given costmap_ the master's size, empty: that is the new grid.
+      const bool same_size = getSizeInCellsX() == geometry.size_x && getSizeInCellsY() == geometry.size_y;
+      const MoveReport report = same_size ? core_->moveTo(geometry, false, costmap_, default_value_) :
+                                            core_->moveTo(geometry, false);
       ROS_INFO("SharingLayer (%s): grid now %s; %zu shared obstacle(s) kept by world position, %zu of their "
                "cells off the new grid dropped (%zu obstacle(s) left with none)",
                params_.robot_name.c_str(), geometry.describe().c_str(), core_->sharedObstacles().size(),
@@ -286,7 +317,10 @@ void SharingLayer::followRollingWindow(double robot_x, double robot_y)
   {
     return;
   }
-  const MoveReport report = core_->moveTo(geometry, true);
+  // updateOrigin() has moved costmap_ itself: the core takes it as it is.
+  const bool same_size = getSizeInCellsX() == geometry.size_x && getSizeInCellsY() == geometry.size_y;
+  const MoveReport report =
+      same_size ? core_->moveTo(geometry, true, costmap_, default_value_) : core_->moveTo(geometry, true);
   if (report.shared_cells_dropped > 0)
   {
     ROS_INFO_THROTTLE(10.0, "SharingLayer (%s): the rolling window left %zu cell(s) of shared obstacles behind "
@@ -772,12 +806,15 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
       pre_static_scans_.clear();
     }
   }
-  // The core's obstacle grid is this layer's data; copy the window, then combine like ObstacleLayer.
+  // The core's obstacle grid is this layer's costmap_ (shareGridWithCore); only if it could not be, copy the window.
   const CostGrid& grid = core_->obstacleGrid();
-  const unsigned int size_x = getSizeInCellsX();
-  for (int j = min_j; j < max_j; ++j)
+  if (grid.data() != costmap_)
   {
-    std::copy(grid.data() + j * size_x + min_i, grid.data() + j * size_x + max_i, costmap_ + j * size_x + min_i);
+    const unsigned int size_x = getSizeInCellsX();
+    for (int j = min_j; j < max_j; ++j)
+    {
+      std::copy(grid.data() + j * size_x + min_i, grid.data() + j * size_x + max_i, costmap_ + j * size_x + min_i);
+    }
   }
   if (footprint_clearing_enabled_)
   {
@@ -799,10 +836,10 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
 
 void SharingLayer::clearArea(int start_x, int start_y, int end_x, int end_y, bool invert_area)
 {
-  ObstacleLayer::clearArea(start_x, start_y, end_x, end_y, invert_area);
   std::lock_guard<std::mutex> lock(core_mutex_);
   if (!core_)
   {
+    ObstacleLayer::clearArea(start_x, start_y, end_x, end_y, invert_area);
     return;
   }
   std::size_t cleared = 0;
@@ -829,6 +866,8 @@ void SharingLayer::clearArea(int start_x, int start_y, int end_x, int end_y, boo
       }
     }
   }
+  // After the core, which counts what it clears in the grid they share (the same cells, so nothing is left).
+  ObstacleLayer::clearArea(start_x, start_y, end_x, end_y, invert_area);
   ROS_INFO("SharingLayer (%s): clearArea cleared %zu obstacle cell(s) of its own; shared obstacles stay",
            params_.robot_name.c_str(), cleared);
 }

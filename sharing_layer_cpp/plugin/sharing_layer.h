@@ -50,9 +50,12 @@ public:
   void matchSize() override;
   void onFootprintChanged() override;
   /// @brief What clear_costmap_recovery calls (CostmapLayer::clearArea): the layer's own obstacle marks outside
-  /// the window (or inside it, with invert_area) are cleared in the core too, which would otherwise draw them
-  /// back in the next updateCosts; shared obstacles stay.
+  /// the window (or inside it, with invert_area) are cleared, and stop being this robot's candidates; shared
+  /// obstacles stay.
   void clearArea(int start_x, int start_y, int end_x, int end_y, bool invert_area = false) override;
+  /// @brief Whether the core clears and marks this layer's own costmap_ (one obstacle grid; false only while the
+  /// two sizes differ, when the core keeps its own and the window is copied in updateCosts).
+  bool sharesGridWithCore();
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
@@ -73,6 +76,10 @@ private:
   void checkPlanPublishers(const ros::TimerEvent&);
   /// @brief Hands the last fleet_robots message to the core, in the global frame; core_mutex_ held.
   void applyFleetRobots();
+  /// @brief Whether costmap_ has the core's size (then the core can use it as its obstacle grid).
+  bool gridMatchesCore() const;
+  /// @brief Hands costmap_ to the core as its obstacle grid; core_mutex_ held.
+  void shareGridWithCore();
   /// @brief Publishes a trigger's proposals and logs it; call with core_mutex_ held.
   void handleTrigger(const TriggerReport& report, double now);
   /// @brief Hands the unknown cells of the last map to the core, in the master's geometry; core_mutex_ held.

@@ -1392,7 +1392,32 @@ ObstacleUpdate reprojectUpdate(const ObstacleUpdate& update, const GridGeometry&
   return out;
 }
 
+void SharingCore::useObstacleGrid(std::uint8_t* costs, std::uint8_t default_value)
+{
+  if (costs == nullptr)
+  {
+    throw std::invalid_argument("SharingCore::useObstacleGrid: no buffer for " + geometry().describe());
+  }
+  obstacles_ = CostGrid::view(geometry(), costs, default_value);
+}
+
+MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observations, std::uint8_t* costs,
+                               std::uint8_t default_value)
+{
+  if (costs == nullptr)
+  {
+    throw std::invalid_argument("SharingCore::moveTo: no buffer for " + geometry.describe());
+  }
+  return moveGrid(geometry, keep_observations, costs, default_value);
+}
+
 MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observations)
+{
+  return moveGrid(geometry, keep_observations, nullptr, FREE_SPACE);
+}
+
+MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observations, std::uint8_t* costs,
+                                 std::uint8_t default_value)
 {
   const GridGeometry old = this->geometry();
   MoveReport report;
@@ -1411,8 +1436,9 @@ MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observati
     return true;
   };
 
-  // Allocate first: nothing changes when the new grid cannot be had.
-  CostGrid obstacles(geometry, FREE_SPACE);
+  // Allocate first: nothing changes when the new grid cannot be had. A caller's buffer holds the moved grid
+  // already (the old one may be gone).
+  CostGrid obstacles = costs != nullptr ? CostGrid::view(geometry, costs, default_value) : CostGrid(geometry, FREE_SPACE);
   std::vector<std::uint8_t> is_shareable(geometry.cellCount(), 0);
   std::vector<std::uint16_t> monitored(geometry.cellCount(), 0);
   std::vector<std::uint8_t> cell_flags(geometry.cellCount(), 0);
@@ -1420,13 +1446,21 @@ MoveReport SharingCore::moveTo(const GridGeometry& geometry, bool keep_observati
   std::vector<std::uint32_t> shareable;
   if (keep_observations)
   {
-    for (std::uint32_t index = 0; index < old.cellCount(); ++index)
+    if (costs != nullptr)
     {
-      std::uint32_t moved = 0;
-      if (obstacles_.at(index) != FREE_SPACE && to_new(index, moved))
+      report.obstacle_cells_kept = static_cast<std::size_t>(
+          std::count(obstacles.data(), obstacles.data() + geometry.cellCount(), LETHAL_OBSTACLE));
+    }
+    else
+    {
+      for (std::uint32_t index = 0; index < old.cellCount(); ++index)
       {
-        obstacles.set(moved, obstacles_.at(index));
-        report.obstacle_cells_kept += obstacles_.at(index) == LETHAL_OBSTACLE;
+        std::uint32_t moved = 0;
+        if (obstacles_.at(index) != FREE_SPACE && to_new(index, moved))
+        {
+          obstacles.set(moved, obstacles_.at(index));
+          report.obstacle_cells_kept += obstacles_.at(index) == LETHAL_OBSTACLE;
+        }
       }
     }
     for (std::uint32_t index : shareable_)

@@ -4,6 +4,7 @@
 // counted.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 #include <stdexcept>
@@ -286,4 +287,108 @@ TEST(Reproject, AnUpdateFromAnotherGridKeepsItsCellsInTheWorldAndDropsWhatFallsO
   ObstacleUpdate bad = u;
   bad.marked.push_back(sender.cellCount());
   EXPECT_THROW(reprojectUpdate(bad, window), std::invalid_argument);
+}
+
+namespace
+{
+/// What Costmap2D::updateOrigin does to a layer's grid: the cells of the overlap keep their world position, the rest
+/// goes back to the default value.
+std::vector<std::uint8_t> shifted(const std::vector<std::uint8_t>& grid, const GridGeometry& from, const GridGeometry& to,
+                                  std::uint8_t default_value)
+{
+  std::vector<std::uint8_t> out(to.cellCount(), default_value);
+  for (unsigned int y = 0; y < from.size_y; ++y)
+  {
+    for (unsigned int x = 0; x < from.size_x; ++x)
+    {
+      double wx = 0.0, wy = 0.0;
+      from.mapToWorld(x, y, wx, wy);
+      unsigned int nx = 0, ny = 0;
+      if (to.worldToMap(wx, wy, nx, ny))
+      {
+        out[to.getIndex(nx, ny)] = grid[from.getIndex(x, y)];
+      }
+    }
+  }
+  return out;
+}
+}  // namespace
+
+TEST(OneGrid, TheCoreWritesIntoTheCallersGridAndFollowsItWhenItMoves)
+{
+  // The plugin hands the core its layer's own costmap_ (here with track_unknown_space's NO_INFORMATION default):
+  // scans must leave it exactly as plain raytrace + mark leaves a grid of its own, through a rolling-window move the
+  // caller makes itself (Costmap2D::updateOrigin) and a resize into a new buffer.
+  SimWorld world = walledWorld();
+  world.box(6.0, 5.0, 6.4, 5.4);
+  SharingCore core = makeCore();
+  const GridGeometry old = core.geometry();
+  std::vector<std::uint8_t> layer(old.cellCount(), NO_INFORMATION);
+  core.useObstacleGrid(layer.data(), NO_INFORMATION);
+  EXPECT_EQ(core.obstacleGrid().data(), layer.data());
+  CostGrid reference(old, NO_INFORMATION);
+  const std::vector<std::uint32_t> face = outline(old, 6.0, 5.0, 0.4);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("block", face, Subsection(5.8, 4.8, 6.6, 5.6)), 0.0).ok);
+
+  const Observation first = world.scan(4.5, 5.2, 0.0);
+  core.processScan(first, 1.0);
+  applyScan(reference, first, core.params().limits);
+  ASSERT_EQ(std::vector<std::uint8_t>(reference.data(), reference.data() + old.cellCount()), layer);
+  const std::size_t lethal = static_cast<std::size_t>(std::count(layer.begin(), layer.end(), LETHAL_OBSTACLE));
+  ASSERT_GT(lethal, 0u);
+  const std::set<WorldCell> shared_before = worldCells(old, core.sharedCells("block"));
+
+  // The rolling window moves 1 m right: the caller shifts its own grid in place, then tells the core.
+  const GridGeometry moved(0.05, 1.0, 0.0, old.size_x, old.size_y);
+  const std::vector<std::uint8_t> moved_layer = shifted(layer, old, moved, NO_INFORMATION);
+  std::copy(moved_layer.begin(), moved_layer.end(), layer.begin());
+  const std::vector<std::uint8_t> moved_reference =
+      shifted(std::vector<std::uint8_t>(reference.data(), reference.data() + old.cellCount()), old, moved,
+              NO_INFORMATION);
+  reference = CostGrid(moved, NO_INFORMATION);
+  reference.assign(moved_reference);
+  const MoveReport report = core.moveTo(moved, true, layer.data(), NO_INFORMATION);
+  EXPECT_EQ(report.obstacle_cells_kept, static_cast<std::size_t>(std::count(layer.begin(), layer.end(), LETHAL_OBSTACLE)));
+  EXPECT_EQ(worldCells(moved, core.sharedCells("block")), shared_before);
+  EXPECT_EQ(core.obstacleGrid().data(), layer.data());
+  const Observation second = world.scan(5.0, 5.0, 0.2);
+  core.processScan(second, 2.0);
+  applyScan(reference, second, core.params().limits);
+  EXPECT_EQ(std::vector<std::uint8_t>(reference.data(), reference.data() + moved.cellCount()), layer)
+      << "the caller's grid after a move differs from plain raytrace + mark";
+
+  // A resize into a new buffer (Costmap2D::resizeMap): the new buffer, as the caller left it, is the grid.
+  const GridGeometry larger(0.05, -1.0, -1.0, 260, 260);
+  std::vector<std::uint8_t> resized(larger.cellCount(), NO_INFORMATION);
+  const std::set<WorldCell> shared_moved = worldCells(moved, core.sharedCells("block"));
+  core.moveTo(larger, false, resized.data(), NO_INFORMATION);
+  EXPECT_EQ(core.obstacleGrid().data(), resized.data());
+  EXPECT_EQ(worldCells(larger, core.sharedCells("block")), shared_moved);
+  core.processScan(second, 3.0);
+  CostGrid larger_reference(larger, NO_INFORMATION);
+  applyScan(larger_reference, second, core.params().limits);
+  EXPECT_EQ(std::vector<std::uint8_t>(larger_reference.data(), larger_reference.data() + larger.cellCount()), resized);
+  core.resetObstacleLayer();
+  EXPECT_EQ(std::count(resized.begin(), resized.end(), NO_INFORMATION), static_cast<long>(resized.size()))
+      << "a reset restores the caller's default value";
+  EXPECT_THROW(core.useObstacleGrid(nullptr, FREE_SPACE), std::invalid_argument);
+  EXPECT_THROW(core.moveTo(larger, false, nullptr, FREE_SPACE), std::invalid_argument);
+}
+
+TEST(OneGrid, ACopiedGridOfItsOwnIsIndependentAndAViewIsNot)
+{
+  const GridGeometry g(0.1, 0.0, 0.0, 4, 3);
+  CostGrid own(g, FREE_SPACE);
+  CostGrid copy = own;
+  copy.set(5, LETHAL_OBSTACLE);
+  EXPECT_EQ(own.at(5), FREE_SPACE);
+  std::vector<std::uint8_t> buffer(g.cellCount(), FREE_SPACE);
+  CostGrid view = CostGrid::view(g, buffer.data(), FREE_SPACE);
+  EXPECT_FALSE(view.ownsCells());
+  CostGrid view_copy = view;
+  view_copy.set(7, LETHAL_OBSTACLE);
+  EXPECT_EQ(buffer[7], LETHAL_OBSTACLE);
+  CostGrid moved_own = std::move(copy);
+  EXPECT_TRUE(moved_own.ownsCells());
+  EXPECT_EQ(moved_own.at(5), LETHAL_OBSTACLE);
 }

@@ -258,6 +258,24 @@ public:
    * as it was. Costs one pass over the old grid when keep_observations (a rolling window's grid is small).
    */
   MoveReport moveTo(const GridGeometry& geometry, bool keep_observations);
+  /**
+   * @brief The same for a core whose obstacle grid is a caller's buffer (useObstacleGrid): the grid becomes
+   * `costs` (geometry.cellCount() cells, contents as they are), which the caller has already resized or moved
+   * itself (Costmap2D::resizeMap, updateOrigin). Everything else moves as above.
+   * @throws std::invalid_argument when costs is null
+   */
+  MoveReport moveTo(const GridGeometry& geometry, bool keep_observations, std::uint8_t* costs,
+                    std::uint8_t default_value);
+
+  /**
+   * @brief Makes a caller's buffer of geometry().cellCount() costs the obstacle grid, contents as they are, and
+   * frees the core's own: one obstacle grid, not two (the costmap_2d plugin hands the core its layer's costmap_).
+   * Clearing and marking write into it; resets and clears restore default_value. The caller keeps the buffer
+   * alive and, when it reallocates or moves it, calls moveTo with the new one. A core using a caller's buffer must
+   * not be copied.
+   * @throws std::invalid_argument when costs is null
+   */
+  void useObstacleGrid(std::uint8_t* costs, std::uint8_t default_value);
 
   /// @brief The obstacle-layer reset on reaching a goal: the obstacle grid and the shareable
   /// cells are cleared; shared obstacles stay.
@@ -327,6 +345,9 @@ private:
   void steadyShareable(std::vector<std::uint32_t>& steady);
   /// @return whether a flagged steady cell lies within gap cells around the rectangle, outside it
   bool steadyInRing(const CellRect& rect, int gap) const;
+  /// @brief moveTo, onto a caller's buffer when costs is not null.
+  MoveReport moveGrid(const GridGeometry& geometry, bool keep_observations, std::uint8_t* costs,
+                      std::uint8_t default_value);
   /// @brief Rebuilds view_index_ when obstacles came, went or grew (view_index_stale_).
   void refreshViewIndex();
   /// @brief Flags every present shared cell in cell_flags_ (ScanWatch::kFlaggedWatched) and sets each obstacle's

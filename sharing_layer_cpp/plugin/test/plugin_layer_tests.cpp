@@ -183,6 +183,7 @@ struct SideBySide
       lethal += upstream->getCharMap()[i] == costmap_2d::LETHAL_OBSTACLE;
     }
     EXPECT_EQ(0u, differ) << "cells that differ from costmap_2d's ObstacleLayer";
+    EXPECT_TRUE(ours->sharesGridWithCore()) << "one obstacle grid: the core must work in the layer's own costmap_";
     EXPECT_GT(lethal, 0u) << "the scene marks something";
     unsigned int a[4], b[4];
     upstream_costmap.getBounds(&a[0], &a[1], &a[2], &a[3]);
