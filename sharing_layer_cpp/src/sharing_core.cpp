@@ -143,8 +143,7 @@ SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params
   obstacles_ = CostGrid(GridGeometry(geometry.resolution, geometry.origin_x, geometry.origin_y, geometry.size_x,
                                      geometry.size_y),
                         FREE_SPACE);
-  is_shareable_.assign(geometry.cellCount(), 0);
-  monitored_.assign(geometry.cellCount(), 0);
+  cell_info_.assign(geometry.cellCount(), 0);
   cell_flags_.assign(geometry.cellCount(), 0);
 }
 
@@ -153,15 +152,29 @@ void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count
   // Validate (size) before keeping anything.
   StaticMapFilter check(geometry(), costs, cost_count, params_.static_tolerance, params_.static_occupied_cost);
   (void)check;
-  static_costs_.assign(costs, costs + cost_count);
+  setStaticSource(kStaticOccupied, [&](std::size_t i) { return costs[i] >= params_.static_occupied_cost; });
   rebuildStaticFilter();
+}
+
+template <class IsSet>
+void SharingCore::setStaticSource(std::uint8_t bit, IsSet is_set)
+{
+  for (std::size_t i = 0; i < cell_info_.size(); ++i)
+  {
+    cell_info_[i] = static_cast<std::uint8_t>((cell_info_[i] & ~bit) | (is_set(i) ? bit : 0));
+  }
+  static_source_bits_ |= bit;
 }
 
 void SharingCore::setUnknownMap(const std::uint8_t* unknown, std::size_t cell_count)
 {
   if (unknown == nullptr || cell_count == 0)
   {
-    unknown_.clear();
+    if (static_source_bits_ & kStaticUnknown)
+    {
+      setStaticSource(kStaticUnknown, [](std::size_t) { return false; });
+      static_source_bits_ &= ~kStaticUnknown;
+    }
   }
   else
   {
@@ -170,21 +183,21 @@ void SharingCore::setUnknownMap(const std::uint8_t* unknown, std::size_t cell_co
       throw std::invalid_argument("setUnknownMap: unknown mask has " + std::to_string(cell_count) +
                                   " cells, the layer grid " + geometry().describe());
     }
-    unknown_.assign(unknown, unknown + cell_count);
+    setStaticSource(kStaticUnknown, [&](std::size_t i) { return unknown[i] != 0; });
   }
   rebuildStaticFilter();
 }
 
 void SharingCore::rebuildStaticFilter()
 {
-  if (static_costs_.empty() && unknown_.empty())
+  if (static_source_bits_ == 0)
   {
     static_filter_ = StaticMapFilter();
     return;
   }
-  static_filter_ = StaticMapFilter(geometry(), static_costs_.empty() ? nullptr : static_costs_.data(),
-                                   geometry().cellCount(), params_.static_tolerance, params_.static_occupied_cost,
-                                   unknown_.empty() ? nullptr : unknown_.data());
+  // Occupied or unknown: the static bits lie above kMonitored, so any of them makes the value >= kStaticOccupied.
+  static_filter_ = StaticMapFilter(geometry(), cell_info_.data(), cell_info_.size(), params_.static_tolerance,
+                                   kStaticOccupied);
   dropStaticCandidates();
 }
 
@@ -195,7 +208,7 @@ void SharingCore::dropStaticCandidates()
                                     const bool drop = static_filter_.isStatic(index);
                                     if (drop)
                                     {
-                                      is_shareable_[index] = 0;
+                                      cell_flags_[index] &= ~kShareableFlag;
                                     }
                                     return drop;
                                   }),
@@ -214,15 +227,31 @@ void SharingCore::dropStaticCandidates()
   }
 }
 
-void SharingCore::countRectangle(const CellRect& rect, int delta)
+void SharingCore::markMonitored(const CellRect& rect, bool monitored)
 {
   const GridGeometry& g = geometry();
   for (int y = rect.min_y; y <= rect.max_y; ++y)
   {
-    std::uint16_t* row = monitored_.data() + static_cast<std::size_t>(y) * g.size_x;
+    std::uint8_t* row = cell_info_.data() + static_cast<std::size_t>(y) * g.size_x;
     for (int x = rect.min_x; x <= rect.max_x; ++x)
     {
-      row[x] = static_cast<std::uint16_t>(row[x] + delta);
+      row[x] = static_cast<std::uint8_t>(monitored ? (row[x] | kMonitored) : (row[x] & ~kMonitored));
+    }
+  }
+}
+
+void SharingCore::unmarkMonitored(const CellRect& rect)
+{
+  // Rectangles overlap: unmark the area, then mark again what the others still cover of it.
+  markMonitored(rect, false);
+  for (const auto& entry : shared_)
+  {
+    const CellRect& other = entry.second.rectangle_cells;
+    const CellRect overlap{ std::max(rect.min_x, other.min_x), std::max(rect.min_y, other.min_y),
+                            std::min(rect.max_x, other.max_x), std::min(rect.max_y, other.max_y) };
+    if (!overlap.empty())
+    {
+      markMonitored(overlap, true);
     }
   }
 }
@@ -354,7 +383,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
                         t.watched_free.end(), std::back_inserter(grazed));
     for (std::uint32_t index : t.marked)
     {
-      if (monitored_[index] != 0 || (cell_flags_[index] & kRememberedFlag))
+      if (insideMonitoredRectangle(index) || (cell_flags_[index] & kRememberedFlag))
       {
         marked_known.push_back(index);
       }
@@ -400,7 +429,7 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   marked_watched.clear();
   for (std::uint32_t index : outcome.touch.marked)
   {
-    if (monitored_[index] != 0)
+    if (insideMonitoredRectangle(index))
     {
       marked_watched.push_back(index);
     }
@@ -576,10 +605,10 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
   {
     // Cells marked on a fleet robot do not become shareable (nor stay so when it drives on); an obstacle
     // beside it becomes shareable with the next scan that marks it after the robot left.
-    if (!is_shareable_[index] && !static_filter_.isStatic(index) && !insideMonitoredRectangle(index) &&
+    if (!(cell_flags_[index] & kShareableFlag) && !static_filter_.isStatic(index) && !insideMonitoredRectangle(index) &&
         !fleet_robots_.excludes(index))
     {
-      is_shareable_[index] = 1;
+      cell_flags_[index] |= kShareableFlag;
       shareable_.push_back(index);
     }
   }
@@ -599,7 +628,7 @@ void SharingCore::trackShareable(const ScanTouch& touch, const Observation& obse
                       (origin_finite && (wx - ox) * (wx - ox) + (wy - oy) * (wy - oy) >= range_sq);
     if (drop)
     {
-      is_shareable_[index] = 0;
+      cell_flags_[index] &= ~kShareableFlag;
     }
     return drop;
   });
@@ -627,7 +656,7 @@ std::vector<std::uint32_t> SharingCore::candidates(double robot_x, double robot_
     for (const auto& entry : memory_)
     {
       const std::uint32_t index = entry.first;
-      if (is_shareable_[index] || insideMonitoredRectangle(index) || static_filter_.isStatic(index) ||
+      if ((cell_flags_[index] & kShareableFlag) || insideMonitoredRectangle(index) || static_filter_.isStatic(index) ||
           (!with_robots && fleet_robots_.excludes(index)))
       {
         continue;
@@ -1101,7 +1130,7 @@ ApplyResult SharingCore::applyShared(const ObstacleUpdate& update, double now_s)
     found = shared_.emplace(update.uuid, std::move(obstacle)).first;
     result.added = true;
     view_index_stale_ = true;
-    countRectangle(found->second.rectangle_cells, +1);
+    markMonitored(found->second.rectangle_cells, true);
     dropShareableInside(found->second.rectangle_cells);
   }
   SharedObstacle& obstacle = found->second;
@@ -1144,7 +1173,7 @@ void SharingCore::refreshViewIndex()
 
 void SharingCore::refreshSharedFlags()
 {
-  static_assert(((kSteadyFlag | kRememberedFlag) & ~ScanWatch::kOwnerBits) == 0,
+  static_assert(((kSteadyFlag | kRememberedFlag | kShareableFlag) & ~ScanWatch::kOwnerBits) == 0,
                 "the core's own cell flags must be owner bits of the scan's scratch");
   if (!shared_flags_stale_)
   {
@@ -1308,9 +1337,8 @@ void SharingCore::growRectangle(SharedObstacle& obstacle, const Subsection& rect
   }
   obstacle.rectangle = Subsection(std::min(r.min_x, rectangle.min_x), std::min(r.min_y, rectangle.min_y),
                                   std::max(r.max_x, rectangle.max_x), std::max(r.max_y, rectangle.max_y));
-  countRectangle(obstacle.rectangle_cells, -1);
   obstacle.rectangle_cells = obstacle.rectangle.cells(geometry());
-  countRectangle(obstacle.rectangle_cells, +1);
+  markMonitored(obstacle.rectangle_cells, true);  // the grown rectangle holds the old one
   dropShareableInside(obstacle.rectangle_cells);
   view_index_stale_ = true;
 }
@@ -1325,7 +1353,7 @@ void SharingCore::dropShareableInside(const CellRect& rect)
                                     const bool inside = rect.contains(static_cast<int>(mx), static_cast<int>(my));
                                     if (inside)
                                     {
-                                      is_shareable_[index] = 0;
+                                      cell_flags_[index] &= ~kShareableFlag;
                                     }
                                     return inside;
                                   }),
@@ -1340,8 +1368,9 @@ bool SharingCore::expire(const std::string& uuid)
     return false;
   }
   markDirty(found->second.cells.present());
-  countRectangle(found->second.rectangle_cells, -1);
+  const CellRect rectangle = found->second.rectangle_cells;
   shared_.erase(found);
+  unmarkMonitored(rectangle);
   shared_flags_stale_ = true;
   view_index_stale_ = true;
   return true;
@@ -1439,8 +1468,7 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
   // Allocate first: nothing changes when the new grid cannot be had. A caller's buffer holds the moved grid
   // already (the old one may be gone).
   CostGrid obstacles = costs != nullptr ? CostGrid::view(geometry, costs, default_value) : CostGrid(geometry, FREE_SPACE);
-  std::vector<std::uint8_t> is_shareable(geometry.cellCount(), 0);
-  std::vector<std::uint16_t> monitored(geometry.cellCount(), 0);
+  std::vector<std::uint8_t> cell_info(geometry.cellCount(), 0);
   std::vector<std::uint8_t> cell_flags(geometry.cellCount(), 0);
 
   std::vector<std::uint32_t> shareable;
@@ -1466,9 +1494,9 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
     for (std::uint32_t index : shareable_)
     {
       std::uint32_t moved = 0;
-      if (to_new(index, moved) && !is_shareable[moved])
+      if (to_new(index, moved) && !(cell_flags[moved] & kShareableFlag))
       {
-        is_shareable[moved] = 1;
+        cell_flags[moved] |= kShareableFlag;
         shareable.push_back(moved);
       }
     }
@@ -1489,9 +1517,8 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
   }
 
   obstacles_ = std::move(obstacles);
-  is_shareable_.swap(is_shareable);
   shareable_.swap(shareable);
-  monitored_.swap(monitored);
+  cell_info_.swap(cell_info);  // no static sources on the new grid (set again), monitoring marked below
   cell_flags_.swap(cell_flags);  // a fresh scratch: every present cell is flagged again at the next scan
   flagged_cells_.clear();
   shared_flags_stale_ = true;
@@ -1501,8 +1528,7 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
   {
     cell_flags_[entry.first] |= kRememberedFlag;
   }
-  static_costs_.clear();
-  unknown_.clear();
+  static_source_bits_ = 0;
   static_filter_ = StaticMapFilter();
   fleet_robots_.setGeometry(geometry);
   last_new_marked_.clear();
@@ -1528,7 +1554,7 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
     obstacle.rectangle_cells = obstacle.rectangle.cells(geometry);
     if (!obstacle.rectangle_cells.empty())
     {
-      countRectangle(obstacle.rectangle_cells, +1);
+      markMonitored(obstacle.rectangle_cells, true);
       dropShareableInside(obstacle.rectangle_cells);
     }
     report.obstacles_out_of_grid += obstacle.cells.presentCount() == 0;
@@ -1542,7 +1568,7 @@ void SharingCore::resetObstacleLayer()
   obstacles_.reset();
   for (std::uint32_t index : shareable_)
   {
-    is_shareable_[index] = 0;
+    cell_flags_[index] &= ~kShareableFlag;
   }
   shareable_.clear();
   // What the robot saw before the reset is forgotten with it (the trigger memory and the plan trigger's
@@ -1597,7 +1623,7 @@ std::size_t SharingCore::clearObstaclesOutside(int x0, int y0, int x1, int y1)
     }
     else
     {
-      is_shareable_[index] = 0;
+      cell_flags_[index] &= ~kShareableFlag;
     }
   }
   shareable_.swap(kept);

@@ -392,3 +392,30 @@ TEST(OneGrid, ACopiedGridOfItsOwnIsIndependentAndAViewIsNot)
   EXPECT_TRUE(moved_own.ownsCells());
   EXPECT_EQ(moved_own.at(5), LETHAL_OBSTACLE);
 }
+
+TEST(Monitoring, AnExpiredObstacleLeavesTheRectangleOfAnOverlappingOneMonitored)
+{
+  // Cells inside a shared obstacle's rectangle are monitoring's, never this robot's own candidates. Two obstacles
+  // cover the block; when one expires, the other's rectangle must still hold the block's cells.
+  SimWorld world = walledWorld();
+  world.box(6.0, 5.0, 6.4, 5.4);
+  SharingCore core = makeCore();
+  const GridGeometry g = core.geometry();
+  const Subsection around(5.8, 4.8, 6.6, 5.6);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("a", { indexAt(g, 6.55, 5.55) }, around), 0.0).ok);
+  ASSERT_TRUE(core.applyShared(sharedUpdate("b", { indexAt(g, 5.85, 4.85) }, Subsection(5.8, 4.8, 6.7, 5.7)), 0.0).ok);
+  ASSERT_TRUE(core.expire("a"));
+  const Observation scan = world.scan(4.5, 5.2, 0.0);
+  core.processScan(scan, 1.0);
+  const std::vector<std::uint32_t> face = core.shareableCells();
+  EXPECT_TRUE(std::none_of(face.begin(), face.end(), [&](std::uint32_t index) {
+    unsigned int mx = 0, my = 0;
+    g.indexToCells(index, mx, my);
+    double wx = 0.0, wy = 0.0;
+    g.mapToWorld(mx, my, wx, wy);
+    return wx >= around.min_x && wx <= around.max_x && wy >= around.min_y && wy <= around.max_y;
+  })) << "cells of obstacle b's rectangle became shareable when a expired";
+  ASSERT_TRUE(core.expire("b"));
+  core.processScan(scan, 1.1);
+  EXPECT_FALSE(core.shareableCells().empty()) << "with no obstacle left the block's face is this robot's candidate";
+}

@@ -314,6 +314,9 @@ public:
 private:
   void trackShareable(const ScanTouch& touch, const Observation& observation, double obstacle_range);
   void rebuildStaticFilter();
+  /// @brief Sets `bit` of cell_info_ where is_set(index), clears it elsewhere.
+  template <class IsSet>
+  void setStaticSource(std::uint8_t bit, IsSet is_set);
   void dropStaticCandidates();
   void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, const Observation& observation,
                 double now_s);
@@ -328,8 +331,11 @@ private:
   std::vector<std::size_t> planAhead(double robot_x, double robot_y, double reach) const;
   bool nearPlan(std::uint32_t index, const std::vector<std::size_t>& ahead) const;
   void markDirty(const std::vector<std::uint32_t>& cells);
-  bool insideMonitoredRectangle(std::uint32_t index) const { return monitored_[index] != 0; }
-  void countRectangle(const CellRect& rect, int delta);
+  bool insideMonitoredRectangle(std::uint32_t index) const { return (cell_info_[index] & kMonitored) != 0; }
+  /// @brief Sets (or clears) kMonitored over a rectangle of cells.
+  void markMonitored(const CellRect& rect, bool monitored);
+  /// @brief After an obstacle left: clears kMonitored over its rectangle but where another still covers it.
+  void unmarkMonitored(const CellRect& rect);
   /// @brief The union of the monitored rectangles: an obstacle's rectangle only grows (merging), here as in
   /// the handler, so its monitoring covers every cell the fleet added to it.
   void growRectangle(SharedObstacle& obstacle, const Subsection& rectangle);
@@ -361,8 +367,14 @@ private:
   StaticMapFilter static_filter_;
   TriggerDebounce trigger_;
   TriggerDebounce plan_trigger_;
-  std::vector<std::uint8_t> static_costs_;   ///< last setStaticMap input (empty: none)
-  std::vector<std::uint8_t> unknown_;        ///< last setUnknownMap input (empty: none)
+  /// Per cell, one byte: kMonitored where a shared obstacle's rectangle covers it, and what the static filter is
+  /// built from (kept to rebuild it when one of them changes): kStaticOccupied where the last setStaticMap was a
+  /// wall, kStaticUnknown where the last setUnknownMap was unknown.
+  std::vector<std::uint8_t> cell_info_;
+  std::uint8_t static_source_bits_ = 0;  ///< the static sources given so far
+  static constexpr std::uint8_t kMonitored = 1;
+  static constexpr std::uint8_t kStaticOccupied = 2;
+  static constexpr std::uint8_t kStaticUnknown = 4;
   std::unordered_map<std::uint32_t, RememberedCell> memory_;
   std::vector<std::pair<double, double>> plan_;
   std::vector<std::uint32_t> last_new_marked_;  ///< non-static cells the last scan marked that were not lethal before
@@ -372,15 +384,15 @@ private:
   double last_origin_x_ = 0.0;  ///< sensor origin of the last scan (NaN before the first)
   double last_origin_y_ = 0.0;
   std::vector<std::uint32_t> shareable_;
-  std::vector<std::uint8_t> is_shareable_;
-  std::vector<std::uint16_t> monitored_;  ///< per cell: how many monitored rectangles cover it
-  /// Per-cell flags: ScanWatch::kFlaggedWatched on every present shared cell (kept between scans, so a scan
-  /// does not list them: refreshSharedFlags), applyScan's own bits during a scan, kRememberedFlag on the cells of
-  /// memory_, and kSteadyFlag on the current scan's growth candidates (steadyShareable) until processScan resets
-  /// them.
+
+  /// Per-cell flags, one byte for all: ScanWatch::kFlaggedWatched on every present shared cell (kept between scans,
+  /// so a scan does not list them: refreshSharedFlags), applyScan's own bits during a scan, kShareableFlag on the
+  /// cells of shareable_, kRememberedFlag on the cells of memory_, and kSteadyFlag on the current scan's growth
+  /// candidates (steadyShareable) until processScan resets them.
   std::vector<std::uint8_t> cell_flags_;
   static constexpr std::uint8_t kSteadyFlag = 0x80;
   static constexpr std::uint8_t kRememberedFlag = 0x40;  ///< the cell is in memory_ (kept with it)
+  static constexpr std::uint8_t kShareableFlag = 0x20;   ///< the cell is in shareable_ (kept with it)
   std::vector<std::uint32_t> flagged_cells_;  ///< cells flagged kFlaggedWatched
   bool shared_flags_stale_ = true;            ///< present shared cells changed since refreshSharedFlags
   std::map<std::string, SharedObstacle> shared_;
