@@ -262,6 +262,31 @@ TEST(PluginLayer, ASourceThatMarksAndClearsMatchesObstacleLayer)
   maps.expectSame("second scan from (5.6, 4.7), clearing the first's marks");
 }
 
+TEST(PluginLayer, TrackUnknownSpaceKeepsUnseenCellsUnknownAsObstacleLayerDoes)
+{
+  // track_unknown_space: the layer's grid starts NO_INFORMATION and keeps it where no beam passed; updateWithMax
+  // leaves those cells of the master alone.
+  for (const std::string layer : { "~upstream_unknown/", "~ours_unknown/" })
+  {
+    ros::param::set(layer + "track_unknown_space", true);
+  }
+  SideBySide maps("unknown", { { "scan", true, true, 2.5, 3.0 } }, false, 200);
+  placeLaser(maps.tf, 5.0, 5.0);
+  maps.feed(0, ring(360, 0.0));
+  maps.update(5.0, 5.0);
+  maps.expectSame("first scan from (5, 5)");
+  std::size_t unknown = 0;
+  for (std::size_t i = 0; i < 200u * 200u; ++i)
+  {
+    unknown += maps.ours->getCharMap()[i] == costmap_2d::NO_INFORMATION;
+  }
+  EXPECT_GT(unknown, 200u * 200u / 2) << "cells no beam reached must stay unknown";
+  placeLaser(maps.tf, 5.6, 4.7);
+  maps.feed(0, ring(360, 0.01));
+  maps.update(5.6, 4.7);
+  maps.expectSame("second scan from (5.6, 4.7)");
+}
+
 TEST(PluginLayer, MarkingOnlyAndClearingOnlySourcesWithTheirOwnRangesMatchObstacleLayer)
 {
   SideBySide maps("roles", { { "marker", true, false, 4.0, 3.0 }, { "clearer", false, true, 2.5, 6.0 } }, false,
