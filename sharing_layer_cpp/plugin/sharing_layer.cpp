@@ -1,6 +1,7 @@
 #include "sharing_layer.h"
 
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <iterator>
 #include <sstream>
@@ -728,7 +729,13 @@ bool SharingLayer::sourceObservations(std::vector<SourceObservation>& out)
   std::vector<SourceObservation> by_rank[3];
   const auto add = [&](const costmap_2d::Observation& observation, bool marking, bool clearing,
                        const std::string& source) {
-    ScanLimits limits = params_.limits;  // the layer's heights; ranges and roles are the source's
+    // As ObstacleLayer: the source's observation buffer has kept only points within the source's heights, and
+    // the layer's max_obstacle_height (dynamic_reconfigure's, read every cycle) bounds marking only. Ranges and
+    // roles are the source's.
+    ScanLimits limits = params_.limits;
+    limits.min_obstacle_height = -std::numeric_limits<double>::infinity();
+    limits.max_obstacle_height = std::numeric_limits<double>::infinity();
+    limits.max_marking_height = max_obstacle_height_;
     limits.obstacle_range = observation.obstacle_range_;
     limits.raytrace_range = observation.raytrace_range_;
     limits.marking = marking;

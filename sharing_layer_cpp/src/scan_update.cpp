@@ -24,6 +24,10 @@ void ScanLimits::validate() const
   };
   check_range(obstacle_range, "obstacle_range");
   check_range(raytrace_range, "raytrace_range");
+  if (std::isnan(max_marking_height))
+  {
+    throw std::invalid_argument("ScanLimits: max_marking_height must not be NaN");
+  }
   if (std::isnan(min_obstacle_height) || std::isnan(max_obstacle_height) || min_obstacle_height > max_obstacle_height)
   {
     throw std::invalid_argument("ScanLimits: need min_obstacle_height <= max_obstacle_height, got " +
@@ -612,7 +616,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
       continue;  // counted in the clearing pass, or below when it did not run
     }
     const double sq_dist = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + (p.z - oz) * (p.z - oz);
-    const bool in_range = limits.marking && sq_dist < sq_obstacle_range;
+    const bool in_range = limits.marking && sq_dist < sq_obstacle_range && !(p.z > limits.max_marking_height);
     const double sq_planar = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy);
     if (!in_range && !(sq_planar <= sq_hit_range))
     {

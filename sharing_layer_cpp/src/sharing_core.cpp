@@ -348,6 +348,10 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       }
       const double dz = p.z - observation.origin.z;
       const double d_sq = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz;
+      if (p.z > l.max_marking_height && d_sq < sq_range)
+      {
+        continue;  // cleared along, not marked
+      }
       if (d_sq >= sq_range)
       {
         unsigned int mx = 0, my = 0;

@@ -303,3 +303,21 @@ TEST(ScanUpdate, AClearingOnlySourceClearsWithoutMarkingButItsEndpointsStillCoun
   EXPECT_EQ(touch.watched_hit, std::vector<std::uint32_t>{ 2 * 12 + 8 });  // evidence the cell is occupied
   EXPECT_TRUE(touch.watched_free.empty());
 }
+
+TEST(ApplyScan, PointsAboveTheMarkingHeightClearButAreNotMarked)
+{
+  // costmap_2d ObstacleLayer's layer-level max_obstacle_height: it bounds marking only.
+  CostGrid grid = smallGrid(LETHAL_OBSTACLE);
+  Observation obs;
+  obs.origin = Point3{ 0.05, 0.25, 0.5 };
+  obs.points = { Point3{ 0.55, 0.25, 0.5 }, Point3{ 0.35, 0.15, 0.2 } };
+  ScanLimits limits;
+  limits.max_marking_height = 0.4;
+  const ScanTouch touch = applyScan(grid, obs, limits);
+  EXPECT_EQ(FREE_SPACE, grid.getCost(5, 2)) << "the high point's cell is cleared, not marked";
+  EXPECT_EQ(FREE_SPACE, grid.getCost(3, 2));
+  EXPECT_EQ(LETHAL_OBSTACLE, grid.getCost(3, 1)) << "the low point is marked";
+  EXPECT_EQ(std::vector<std::uint32_t>{ 1 * 12 + 3 }, touch.marked);
+  limits.max_marking_height = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(applyScan(grid, obs, limits), std::invalid_argument);
+}

@@ -2,6 +2,7 @@
 #define SHARING_LAYER_OBSERVATION_H
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace sharing_layer
@@ -29,6 +30,9 @@ struct ScanLimits
   double raytrace_range = 3.0;        ///< cells closer than this on a beam are cleared (m)
   double min_obstacle_height = 0.0;   ///< points below are ignored for marking and clearing (m)
   double max_obstacle_height = 2.0;   ///< points above are ignored for marking and clearing (m)
+  /// Points above are cleared along but not marked (m): costmap_2d ObstacleLayer's layer-level
+  /// max_obstacle_height, which dynamic_reconfigure changes (its sources' heights filter both, as the two above).
+  double max_marking_height = std::numeric_limits<double>::infinity();
   /// costmap_2d's per-source `marking` and `clearing`: a source may only mark (no raytracing) or only clear
   /// (its endpoints are not marked, though one in a watched cell is still evidence that the cell is occupied).
   bool marking = true;

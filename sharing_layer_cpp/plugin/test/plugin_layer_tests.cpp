@@ -287,6 +287,33 @@ TEST(PluginLayer, TrackUnknownSpaceKeepsUnseenCellsUnknownAsObstacleLayerDoes)
   maps.expectSame("second scan from (5.6, 4.7)");
 }
 
+TEST(PluginLayer, TheLayersMaxObstacleHeightBoundsMarkingOnlyAsObstacleLayersDoes)
+{
+  // The layer-level max_obstacle_height (the one dynamic_reconfigure changes) keeps points above it from being
+  // marked, yet they still clear; the source's own heights (2 m here) filter both in the observation buffer.
+  for (const std::string layer : { "~upstream_height/", "~ours_height/" })
+  {
+    ros::param::set(layer + "max_obstacle_height", 0.4);
+  }
+  SideBySide maps("height", { { "scan", true, true, 2.5, 3.0 } }, false, 200);
+  const auto at_height = [](sensor_msgs::PointCloud2 cloud, bool alternate) {
+    sensor_msgs::PointCloud2Iterator<float> z(cloud, "z");
+    for (int i = 0; z != z.end(); ++i, ++z)
+    {
+      *z = alternate && i % 2 == 0 ? 0.0f : -0.3f;  // the laser at 0.5 m: points at 0.5 m or 0.2 m
+    }
+    return cloud;
+  };
+  placeLaser(maps.tf, 5.0, 5.0);
+  maps.feed(0, at_height(ring(360, 0.0), false));
+  maps.update(5.0, 5.0);
+  maps.expectSame("every point at 0.2 m: marked");
+  placeLaser(maps.tf, 5.6, 4.7);
+  maps.feed(0, at_height(ring(360, 0.01), true));
+  maps.update(5.6, 4.7);
+  maps.expectSame("every other point at 0.5 m: clears the first scan's marks, marks nothing");
+}
+
 TEST(PluginLayer, MarkingOnlyAndClearingOnlySourcesWithTheirOwnRangesMatchObstacleLayer)
 {
   SideBySide maps("roles", { { "marker", true, false, 4.0, 3.0 }, { "clearer", false, true, 2.5, 6.0 } }, false,
