@@ -385,8 +385,7 @@ private:
 bool inRegion(const std::vector<CellRect>& regions, unsigned int x, unsigned int y)
 {
   return std::any_of(regions.begin(), regions.end(), [x, y](const CellRect& r) {
-    return static_cast<int>(x) >= r.min_x && static_cast<int>(x) <= r.max_x && static_cast<int>(y) >= r.min_y &&
-           static_cast<int>(y) <= r.max_y;
+    return r.contains(static_cast<int>(x), static_cast<int>(y));
   });
 }
 
@@ -479,6 +478,13 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
   ScanScratch& scan_scratch = scanScratch();
   std::vector<std::uint32_t>& seen_cells = scan_scratch.seen_cells;
   seen_cells.clear();
+  const auto note = [&seen_cells, flags](std::uint32_t index, std::uint8_t evidence) {
+    if (!(flags[index] & kSeen))
+    {
+      seen_cells.push_back(index);
+    }
+    flags[index] |= evidence;
+  };
   touch.marked.reserve(observation.points.size());
 
   // Clearing, exactly as without a watch; the beams that reach a watched cell are walked again below.
@@ -631,11 +637,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
     if (watching && (flags[index] & kWatched) && !(flags[index] & kHit) &&
         ((flags[index] & kListed) || inRegion(watch.regions, mx, my)))
     {
-      if (!(flags[index] & kSeen))
-      {
-        seen_cells.push_back(index);
-      }
-      flags[index] |= kHit;
+      note(index, kHit);
     }
     if (in_range)
     {
@@ -694,11 +696,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
           const std::uint32_t end = g.getIndex(beam.end_x, beam.end_y);
           if ((flags[end] & kWatched) && !(flags[end] & kHit))  // an endpoint in a watched cell, at any range
           {
-            if (!(flags[end] & kSeen))
-            {
-              seen_cells.push_back(end);
-            }
-            flags[end] |= kHit;
+            note(end, kHit);
           }
         }
         const LineSteps& line = beam.line;
@@ -744,10 +742,6 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
             const std::uint32_t index = line.x_major ? g.getIndex(a, b) : g.getIndex(b, a);
             if (flags[index] & kWatched)
             {
-              if (!(flags[index] & kSeen))
-              {
-                seen_cells.push_back(index);
-              }
               if (beam.own_steps == BeamIndex::kUnset)
               {
                 beam.own_steps = own_deep_steps(beam);
@@ -761,7 +755,7 @@ ScanTouch applyScan(CostGrid& grid, const Observation& observation, const ScanLi
                 }
                 deep = static_cast<unsigned int>(i) < beam.deep_steps;
               }
-              flags[index] |= deep ? kVisitedDeep : kVisitedShallow;
+              note(index, deep ? kVisitedDeep : kVisitedShallow);
             }
           }
           error += line.abs_db;

@@ -285,12 +285,9 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
   if (origin_finite)
   {
     refreshViewIndex();
-    const double radius_sq = view_radius * view_radius;
     for (const ViewEntry& entry : view_index_)  // contiguous: no walk through the map's nodes
     {
-      const double dx = std::max({ entry.min_x - ox, 0.0, ox - entry.max_x });
-      const double dy = std::max({ entry.min_y - oy, 0.0, oy - entry.max_y });
-      if (dx * dx + dy * dy <= radius_sq)  // Subsection::withinRadius
+      if (entry.rectangle.withinRadius(ox, oy, view_radius))
       {
         in_view.push_back(entry.obstacle);
         if (!entry.obstacle->present_box.empty())
@@ -521,8 +518,8 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
       obstacle->last_observation = now_s;
     }
     ObstacleUpdate update;
-    update.marked = marked;
-    update.cleared = cleared;
+    update.marked = std::move(marked);  // (cleared again for the next obstacle)
+    update.cleared = std::move(cleared);
     update.uuid = obstacle->uuid;
     update.deadline = obstacle->deadline;
     update.rectangle = obstacle->rectangle;
@@ -552,10 +549,9 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   }
   // Remembered cells leave on the same evidence as shared ones, not on costmap clearing: a robot backing off
   // clears a block's face with beams that end on it past obstacle_range.
-  // (The flag says which cells are remembered without a lookup: most watched cells are shared ones.)
   for (std::uint32_t index : occupied)
   {
-    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
+    const auto found = findRemembered(index);
     if (found != memory_.end())
     {
       found->second.free.reset();
@@ -563,7 +559,7 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   }
   for (std::uint32_t index : touch.watched_free)
   {
-    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
+    const auto found = findRemembered(index);
     if (found != memory_.end())
     {
       if (found->second.free.add(now_s, params_.clearing_scans, params_.clearing_time))
@@ -575,7 +571,7 @@ void SharingCore::remember(const ScanTouch& touch, const std::vector<std::uint32
   }
   for (std::uint32_t index : touch.watched_cleared)
   {
-    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
+    const auto found = findRemembered(index);
     if (found != memory_.end())
     {
       found->second.marks = 0;  // a beam passed through it: not marked steadily
@@ -1168,8 +1164,7 @@ void SharingCore::refreshViewIndex()
     SharedObstacle& obstacle = entry.second;
     if (!obstacle.rectangle_cells.empty())
     {
-      const Subsection& r = obstacle.rectangle;
-      view_index_.push_back(ViewEntry{ r.min_x, r.min_y, r.max_x, r.max_y, &obstacle });
+      view_index_.push_back(ViewEntry{ obstacle.rectangle, &obstacle });
     }
   }
   view_index_stale_ = false;
@@ -1219,7 +1214,7 @@ void SharingCore::steadyShareable(std::vector<std::uint32_t>& steady)
   steady.clear();
   for (std::uint32_t index : shareable_)
   {
-    const auto found = (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
+    const auto found = findRemembered(index);
     if (found != memory_.end() && found->second.marks >= params_.clearing_scans &&
         found->second.time - found->second.marked_since >= params_.clearing_time)
     {

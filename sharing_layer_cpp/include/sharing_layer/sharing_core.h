@@ -356,6 +356,12 @@ private:
                       std::uint8_t default_value);
   /// @brief Rebuilds view_index_ when obstacles came, went or grew (view_index_stale_).
   void refreshViewIndex();
+  /// @return the remembered cell at index, or memory_.end(). Most cells asked about (watched cells, shareable
+  /// cells) are not remembered: kRememberedFlag spares them the hash lookup.
+  std::unordered_map<std::uint32_t, RememberedCell>::iterator findRemembered(std::uint32_t index)
+  {
+    return (cell_flags_[index] & kRememberedFlag) ? memory_.find(index) : memory_.end();
+  }
   /// @brief Flags every present shared cell in cell_flags_ (ScanWatch::kFlaggedWatched) and sets each obstacle's
   /// present_box, when the present cells changed since the last call (shared_flags_stale_).
   void refreshSharedFlags();
@@ -399,7 +405,7 @@ private:
   /// The shared obstacles with cells on the grid and their rectangles, side by side: the in-view test of every scan.
   struct ViewEntry
   {
-    double min_x, min_y, max_x, max_y;
+    Subsection rectangle;
     SharedObstacle* obstacle;
   };
   std::vector<ViewEntry> view_index_;
