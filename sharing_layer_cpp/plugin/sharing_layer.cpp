@@ -232,16 +232,15 @@ bool SharingLayer::sharesGridWithCore()
   return core_ && core_->obstacleGrid().data() == costmap_;
 }
 
-bool SharingLayer::gridMatchesCore() const
+bool SharingLayer::gridMatches(const GridGeometry& g) const
 {
-  const GridGeometry& g = core_->geometry();
   return costmap_ != nullptr && getSizeInCellsX() == g.size_x && getSizeInCellsY() == g.size_y;
 }
 
 void SharingLayer::shareGridWithCore()
 {
   // One obstacle grid: the core clears and marks this layer's own costmap_ (no second grid, no copy per cycle).
-  if (gridMatchesCore())
+  if (gridMatches(core_->geometry()))
   {
     core_->useObstacleGrid(costmap_, default_value_);
   }
@@ -251,6 +250,13 @@ void SharingLayer::shareGridWithCore()
              "its own until the next resize",
              params_.robot_name.c_str(), getSizeInCellsX(), getSizeInCellsY(), core_->geometry().describe().c_str());
   }
+}
+
+MoveReport SharingLayer::moveCore(const GridGeometry& geometry, bool keep_observations)
+{
+  // ObstacleLayer has already resized (matchSize) or moved (updateOrigin) costmap_: the core takes it as it is.
+  return gridMatches(geometry) ? core_->moveTo(geometry, keep_observations, costmap_, default_value_) :
+                                 core_->moveTo(geometry, keep_observations);
 }
 
 void SharingLayer::rebuildCore()
@@ -283,10 +289,7 @@ void SharingLayer::matchSize()
       // A new map (size, resolution or origin): shared obstacles stay where they are in the world. The layer's
       // own grid starts empty, as ObstacleLayer's does after resizeMap.
       const GridGeometry geometry = masterGeometry();
-      // ObstacleLayer::matchSize() has given costmap_ the master's size, empty: that is the new grid.
-      const bool same_size = getSizeInCellsX() == geometry.size_x && getSizeInCellsY() == geometry.size_y;
-      const MoveReport report = same_size ? core_->moveTo(geometry, false, costmap_, default_value_) :
-                                            core_->moveTo(geometry, false);
+      const MoveReport report = moveCore(geometry, false);
       ROS_INFO("SharingLayer (%s): grid now %s; %zu shared obstacle(s) kept by world position, %zu of their "
                "cells off the new grid dropped (%zu obstacle(s) left with none)",
                params_.robot_name.c_str(), geometry.describe().c_str(), core_->sharedObstacles().size(),
@@ -318,10 +321,7 @@ void SharingLayer::followRollingWindow(double robot_x, double robot_y)
   {
     return;
   }
-  // updateOrigin() has moved costmap_ itself: the core takes it as it is.
-  const bool same_size = getSizeInCellsX() == geometry.size_x && getSizeInCellsY() == geometry.size_y;
-  const MoveReport report =
-      same_size ? core_->moveTo(geometry, true, costmap_, default_value_) : core_->moveTo(geometry, true);
+  const MoveReport report = moveCore(geometry, true);
   if (report.shared_cells_dropped > 0)
   {
     ROS_INFO_THROTTLE(10.0, "SharingLayer (%s): the rolling window left %zu cell(s) of shared obstacles behind "

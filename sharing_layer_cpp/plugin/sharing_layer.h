@@ -76,10 +76,13 @@ private:
   void checkPlanPublishers(const ros::TimerEvent&);
   /// @brief Hands the last fleet_robots message to the core, in the global frame; core_mutex_ held.
   void applyFleetRobots();
-  /// @brief Whether costmap_ has the core's size (then the core can use it as its obstacle grid).
-  bool gridMatchesCore() const;
+  /// @brief Whether costmap_ has the size of g (then the core can use it as its obstacle grid on g).
+  bool gridMatches(const GridGeometry& g) const;
   /// @brief Hands costmap_ to the core as its obstacle grid; core_mutex_ held.
   void shareGridWithCore();
+  /// @brief core_->moveTo onto costmap_ as ObstacleLayer left it, or onto a grid of the core's own if the sizes
+  /// differ; core_mutex_ held.
+  MoveReport moveCore(const GridGeometry& geometry, bool keep_observations);
   /// @brief Publishes a trigger's proposals and logs it; call with core_mutex_ held.
   void handleTrigger(const TriggerReport& report, double now);
   /// @brief Hands the unknown cells of the last map to the core, in the master's geometry; core_mutex_ held.

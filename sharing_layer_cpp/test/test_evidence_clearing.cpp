@@ -44,6 +44,15 @@ std::vector<std::uint32_t> shareBlock(SharingCore& core, const SimWorld& world)
   return authorised.marked;
 }
 
+/// Scans through the removed block at 2.0, 2.5 and 3.0 s (the defaults clear after 3 scans over 1 s): the first two
+/// send nothing. @return the third scan's outcome
+ScanOutcome scanUntilCleared(SharingCore& core, const Observation& through)
+{
+  EXPECT_TRUE(core.processScan(through, 2.0).updates.empty());
+  EXPECT_TRUE(core.processScan(through, 2.5).updates.empty());
+  return core.processScan(through, 3.0);
+}
+
 struct DriveResult
 {
   std::size_t updates = 0;
@@ -189,9 +198,7 @@ TEST(EvidenceClearing, RemovedBlockIsClearedAfterClearingScansAndTheUpdateShared
   const Observation through = world.scan(3.6, 5.0, 0.0);
   ASSERT_EQ(3u, defaults().clearing_scans);
   ASSERT_EQ(1.0, defaults().clearing_time);
-  EXPECT_TRUE(core.processScan(through, 2.0).updates.empty());
-  EXPECT_TRUE(core.processScan(through, 2.5).updates.empty());
-  const ScanOutcome outcome = core.processScan(through, 3.0);
+  const ScanOutcome outcome = scanUntilCleared(core, through);
   ASSERT_EQ(1u, outcome.updates.size());
   EXPECT_EQ("block", outcome.updates[0].uuid);
   EXPECT_EQ(face, outcome.updates[0].cleared);
@@ -217,9 +224,7 @@ TEST(EvidenceClearing, APeersObstacleArrivingBetweenScansIsMonitoredToo)
   const Observation through = world.scan(3.6, 5.0, 0.0);
   EXPECT_TRUE(core.processScan(through, 1.0).updates.empty());
   ASSERT_TRUE(core.applyShared(sharedUpdate("block", face, shared.rectangle, 1, "robot_1", 600), 1.5).ok);
-  EXPECT_TRUE(core.processScan(through, 2.0).updates.empty());
-  EXPECT_TRUE(core.processScan(through, 2.5).updates.empty());
-  const ScanOutcome outcome = core.processScan(through, 3.0);
+  const ScanOutcome outcome = scanUntilCleared(core, through);
   ASSERT_EQ(1u, outcome.updates.size());
   EXPECT_EQ(face, outcome.updates[0].cleared);
 }

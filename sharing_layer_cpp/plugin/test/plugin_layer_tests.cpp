@@ -145,6 +145,15 @@ struct SideBySide
     our_costmap.updateMap(robot_x, robot_y, 0.0);
   }
 
+  /// The laser at (x, y), one cloud from the first source, an update there, then both compared (expectSame).
+  void scanFrom(double x, double y, const sensor_msgs::PointCloud2& cloud, const std::string& when)
+  {
+    placeLaser(tf, x, y);
+    feed(0, cloud);
+    update(x, y);
+    expectSame(when);
+  }
+
   /// Cell centres (world, mm) lethal in our master and not in upstream's.
   std::set<std::pair<long, long>> onlyInOurs()
   {
@@ -252,14 +261,8 @@ unsigned char costAt(costmap_2d::LayeredCostmap& costmap, double x, double y)
 TEST(PluginLayer, ASourceThatMarksAndClearsMatchesObstacleLayer)
 {
   SideBySide maps("dual", { { "scan", true, true, 2.5, 3.0 } }, false, 200);
-  placeLaser(maps.tf, 5.0, 5.0);
-  maps.feed(0, ring(360, 0.0));
-  maps.update(5.0, 5.0);
-  maps.expectSame("first scan from (5, 5)");
-  placeLaser(maps.tf, 5.6, 4.7);
-  maps.feed(0, ring(360, 0.01));
-  maps.update(5.6, 4.7);
-  maps.expectSame("second scan from (5.6, 4.7), clearing the first's marks");
+  maps.scanFrom(5.0, 5.0, ring(360, 0.0), "first scan from (5, 5)");
+  maps.scanFrom(5.6, 4.7, ring(360, 0.01), "second scan from (5.6, 4.7), clearing the first's marks");
 }
 
 TEST(PluginLayer, TrackUnknownSpaceKeepsUnseenCellsUnknownAsObstacleLayerDoes)
@@ -271,20 +274,14 @@ TEST(PluginLayer, TrackUnknownSpaceKeepsUnseenCellsUnknownAsObstacleLayerDoes)
     ros::param::set(layer + "track_unknown_space", true);
   }
   SideBySide maps("unknown", { { "scan", true, true, 2.5, 3.0 } }, false, 200);
-  placeLaser(maps.tf, 5.0, 5.0);
-  maps.feed(0, ring(360, 0.0));
-  maps.update(5.0, 5.0);
-  maps.expectSame("first scan from (5, 5)");
+  maps.scanFrom(5.0, 5.0, ring(360, 0.0), "first scan from (5, 5)");
   std::size_t unknown = 0;
   for (std::size_t i = 0; i < 200u * 200u; ++i)
   {
     unknown += maps.ours->getCharMap()[i] == costmap_2d::NO_INFORMATION;
   }
   EXPECT_GT(unknown, 200u * 200u / 2) << "cells no beam reached must stay unknown";
-  placeLaser(maps.tf, 5.6, 4.7);
-  maps.feed(0, ring(360, 0.01));
-  maps.update(5.6, 4.7);
-  maps.expectSame("second scan from (5.6, 4.7)");
+  maps.scanFrom(5.6, 4.7, ring(360, 0.01), "second scan from (5.6, 4.7)");
 }
 
 TEST(PluginLayer, TheLayersMaxObstacleHeightBoundsMarkingOnlyAsObstacleLayersDoes)
@@ -304,14 +301,9 @@ TEST(PluginLayer, TheLayersMaxObstacleHeightBoundsMarkingOnlyAsObstacleLayersDoe
     }
     return cloud;
   };
-  placeLaser(maps.tf, 5.0, 5.0);
-  maps.feed(0, at_height(ring(360, 0.0), false));
-  maps.update(5.0, 5.0);
-  maps.expectSame("every point at 0.2 m: marked");
-  placeLaser(maps.tf, 5.6, 4.7);
-  maps.feed(0, at_height(ring(360, 0.01), true));
-  maps.update(5.6, 4.7);
-  maps.expectSame("every other point at 0.5 m: clears the first scan's marks, marks nothing");
+  maps.scanFrom(5.0, 5.0, at_height(ring(360, 0.0), false), "every point at 0.2 m: marked");
+  maps.scanFrom(5.6, 4.7, at_height(ring(360, 0.01), true),
+                "every other point at 0.5 m: clears the first scan's marks, marks nothing");
 }
 
 TEST(PluginLayer, MarkingOnlyAndClearingOnlySourcesWithTheirOwnRangesMatchObstacleLayer)
@@ -333,10 +325,7 @@ TEST(PluginLayer, MarkingOnlyAndClearingOnlySourcesWithTheirOwnRangesMatchObstac
 TEST(PluginLayer, ARollingWindowMovesLikeObstacleLayersAndKeepsSharedObstaclesInTheWorld)
 {
   SideBySide maps("rolling", { { "scan", true, true, 2.5, 3.0 } }, true, 100);  // a 5 m window
-  placeLaser(maps.tf, 2.0, 2.0);
-  maps.feed(0, ring(360, 0.0));
-  maps.update(2.0, 2.0);
-  maps.expectSame("window around (2, 2)");
+  maps.scanFrom(2.0, 2.0, ring(360, 0.0), "window around (2, 2)");
   ASSERT_TRUE(shareBlockAt3m(maps.our_costmap, 2.0, 2.0));
   // Everything but the shared block is ObstacleLayer's; the block is its 9 cells, where it was sent.
   std::set<std::pair<long, long>> block;
