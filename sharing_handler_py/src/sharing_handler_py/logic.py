@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Tuple
 
 from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
+from sharing_handler_py.nearby import RectangleIndex
 from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
                                            check_indexes, check_message_values, check_uuid)
 from sharing_msgs import obstacle_rules
@@ -261,6 +262,7 @@ class SharingHandler:
         self._max_extent = max_obstacle_extent
         self._merge_distance = float(merge_distance)
         self._entries = {}      # uuid -> _Entry
+        self._nearby = RectangleIndex()  # uuid -> rectangle of every entry, for merging
         self._aliases = {}      # uuid of an absorbed obstacle -> uuid that absorbed it
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
         self._deferred = []     # fleet messages waiting for a grid
@@ -405,9 +407,10 @@ class SharingHandler:
             return None
         self._to_fleet(obstacle)
         self._counters["updates_out"] += 1
+        rectangle = entry.rectangle
         if entry.apply(obstacle):
             self._on_change()
-        if obstacle.rectangle != entry.rectangle or changes.get("rectangle") is not None:
+        if entry.rectangle is not rectangle:
             self._merge_around(obstacle.uuid)
         return obstacle
 
@@ -437,17 +440,22 @@ class SharingHandler:
             entry = _Entry(obstacle, self._clock())
             self._entries[obstacle.uuid] = entry
             entry.apply(obstacle)
-            changed = True
+            changed = grown = True
             _log.info("%s: added obstacle %s from %s (v%d, %d cells, deadline %d s)", self.robot_name,
                       obstacle.uuid, obstacle.source, obstacle.version, len(entry.present),
                       obstacle.deadline)
         else:
+            rectangle = entry.rectangle
             changed = entry.apply(obstacle)
+            grown = entry.rectangle is not rectangle
             entry.note_deadline(self._clock(), obstacle.deadline)
         self._counters["updates_in"] += 1
         self._to_layer(obstacle)
         if changed:
             self._on_change()
+        if grown:
+            # Only an added obstacle or a grown rectangle can come within merge_distance of
+            # another (rectangles never shrink), so most updates need no search at all.
             self._merge_around(obstacle.uuid)
         return True
 
@@ -496,6 +504,7 @@ class SharingHandler:
         gone = sorted(u for u, e in self._entries.items() if now >= e.expires_at)
         for uuid in gone:
             entry = self._entries.pop(uuid)
+            self._nearby.remove(uuid)
             # Remember the uuid (and those it absorbed) at least obstacle_duration more, so a
             # late message cannot resurrect the obstacle on this robot only.
             until = now + max(self._deadline, entry.deadline)
@@ -529,6 +538,7 @@ class SharingHandler:
         entry = _Entry(shared, self._clock())
         self._entries[shared.uuid] = entry
         entry.apply(shared)
+        self._nearby.put(shared.uuid, entry.rectangle)
         self._counters["authorised"] += 1
         _log.info("%s: authorised obstacle %s %s, %d cells, deadline %d s", self.robot_name,
                   shared.uuid, shared.rectangle, len(entry.present), deadline)
@@ -540,11 +550,9 @@ class SharingHandler:
     def _near(self, rectangle):
         """The held obstacle (smallest uuid) whose rectangle overlaps `rectangle` or lies within
         merge_distance of it, or None."""
-        for uuid in sorted(self._entries):
-            entry = self._entries[uuid]
-            if self._mergeable(entry.rectangle, rectangle):
-                return entry
-        return None
+        near = [u for u in self._nearby.near(rectangle, self._merge_distance)
+                if self._mergeable(self._entries[u].rectangle, rectangle)]
+        return self._entries[min(near)] if near else None
 
     def _mergeable(self, a, b):
         """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the
@@ -585,8 +593,9 @@ class SharingHandler:
         nothing near is left (an absorbed rectangle can reach a third obstacle)."""
         while True:
             entry = self._entries[uuid]
-            near = sorted(u for u, other in self._entries.items()
-                          if u != uuid and self._mergeable(other.rectangle, entry.rectangle))
+            self._nearby.put(uuid, entry.rectangle)
+            near = sorted(u for u in self._nearby.near(entry.rectangle, self._merge_distance)
+                          if u != uuid and self._mergeable(self._entries[u].rectangle, entry.rectangle))
             if not near:
                 return uuid
             group = sorted(near + [uuid])
@@ -596,7 +605,9 @@ class SharingHandler:
 
     def _absorb(self, survivor_uuid, absorbed_uuid):
         survivor, absorbed = self._entries[survivor_uuid], self._entries.pop(absorbed_uuid)
+        self._nearby.remove(absorbed_uuid)
         survivor.absorb(absorbed)
+        self._nearby.put(survivor_uuid, survivor.rectangle)
         self._aliases[absorbed_uuid] = survivor_uuid
         self._counters["merged_obstacles"] += 1
         _log.info("%s: obstacles %s %s and %s %s lie within merge_distance %g m: merged into %s, "
