@@ -23,6 +23,8 @@ CACHE = os.environ.get("FLEET_COATY_CACHE", os.path.expanduser("~/.cache/fleet-c
 PACKAGES = ["@coaty/core@2.4.1", "rxjs@^6.6.7"]
 OT = "org.fleetsharing.SharedObstacle"
 FOOTPRINT_OT = "org.fleetsharing.RobotFootprint"
+# robot_0's advert below stands at (1.25, 2.25): the 10 m area (0, 0), footprint_area_size's default
+FOOTPRINT_AREA_OT = FOOTPRINT_OT + ".area_0_0"
 NETWORK_ERRORS = ("ENOTFOUND", "EAI_AGAIN", "ECONNREFUSED", "ECONNRESET", "ETIMEDOUT", "ENETUNREACH",
                   "network", "proxy")
 
@@ -78,7 +80,7 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
         robot_0 = ros_graph.bridge("robot_0", *params)
         probe = ros_graph.probe("robot_0", "robot_1")
         peer = json_lines_process(
-            "coaty_js_peer", ["node", os.path.join(HERE, "coaty_js_peer.js"), broker.url, "fleet", OT, FOOTPRINT_OT],
+            "coaty_js_peer", ["node", os.path.join(HERE, "coaty_js_peer.js"), broker.url, "fleet", OT, FOOTPRINT_AREA_OT],
             env=dict(os.environ, NODE_PATH=os.path.join(coaty_js, "node_modules")), cwd=coaty_js)
         try:
             peer.expect(lambda e: e.get("event") == "ready", what="Coaty JS agent online")
@@ -135,6 +137,8 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
             seen = peer.expect(lambda e: e.get("event") == "footprint", what="(e) robot_0's footprint at the peer")
             assert seen["object"]["robot"] == "robot_0" and seen["object"]["footprint"] == square
             assert seen["object"]["coreType"] == "CoatyObject" and seen["object"]["frameId"] == "map"
+            assert seen["object"]["objectType"] == FOOTPRINT_AREA_OT
+            # the peer advertises under the plain objectType (it knows no areas): every bridge hears that
             peer.send({"cmd": "publishFootprint", "object": {
                 "objectType": FOOTPRINT_OT, "coreType": "CoatyObject", "objectId": str(uuidlib.uuid4()),
                 "name": "RobotFootprint js_peer", "robot": "js_peer", "stamp": 1700000300, "frameId": "map",

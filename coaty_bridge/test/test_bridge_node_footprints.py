@@ -13,6 +13,7 @@ from coaty_bridge.topics import Topic
 pytestmark = [pytest.mark.ros, pytest.mark.broker]
 OT = fp.DEFAULT_FOOTPRINT_OBJECT_TYPE
 SQUARE = [[1.0, 2.0], [1.5, 2.0], [1.5, 2.5], [1.0, 2.5]]
+AWAY = [[x + 8.0, y] for x, y in SQUARE]   # robot_1's own footprint: the next 10 m area over
 
 
 def robot_0_adverts(observer):
@@ -36,14 +37,17 @@ def wait_fleet(probe, robot, predicate, wait_for, timeout=10.0, what="fleet_robo
 def test_footprints_are_advertised_received_and_forgotten(ros_graph, broker, observer, wait_for):
     params = ["broker_url:=" + broker.url, "footprint_rate:=10.0", "robot_timeout:=1.0"]
     ros_graph.bridge("robot_0", *params)
-    ros_graph.bridge("robot_1", *params)
+    # robot_1 does not advertise, yet hears the areas around its own footprint
+    ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
     probe = ros_graph.probe("robot_0", "robot_1")
     wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
 
-    # robot_0's navigation publishes its footprint: robot_1 learns it, robot_0 never lists itself.
+    # robot_0's navigation publishes its footprint: robot_1 (8 m away) learns it, robot_0 never
+    # lists itself.
     stop_at = time.monotonic() + 2.0
     while time.monotonic() < stop_at:
         probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": SQUARE, "stamp": 0.0})
+        probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY, "stamp": 0.0})
         time.sleep(0.1)
     adverts = robot_0_adverts(observer)
     # a rate, not a count: a loaded machine may run the timer late (judge outcomes, not wall clocks)
@@ -100,9 +104,10 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
     pass for the other."""
     params = ["broker_url:=" + broker.url, "footprint_rate:=0.5", "robot_timeout:=5.0"]
     ros_graph.bridge("robot_0", *params)
-    ros_graph.bridge("robot_1", *params)
+    ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
     probe = ros_graph.probe("robot_0", "robot_1")
     wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
+    probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY})
 
     def square_at(x):
         return [[x + px - 1.0, py] for px, py in SQUARE]
@@ -145,7 +150,8 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
                                           ("footprint_rate:=2.0 robot_timeout:=0.5", "robot_timeout = 0.5"),
                                           ("advertise_footprint:=maybe", "advertise_footprint = 'maybe'"),
                                           ("footprint_min_move:=-0.1", "footprint_min_move = -0.1"),
-                                          ("footprint_object_type:=coaty.F", "footprint_object_type = 'coaty.F'")])
+                                          ("footprint_object_type:=coaty.F", "footprint_object_type = 'coaty.F'"),
+                                          ("footprint_area_size:=0.5", "footprint_area_size = 0.5")])
 def test_bad_footprint_parameters_fail_at_start_up(ros_graph, param, shown):
     node = ros_graph.bridge("robot_0", *param.split())
     out, _ = node.communicate(timeout=20)

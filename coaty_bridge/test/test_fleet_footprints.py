@@ -171,17 +171,19 @@ def test_footprint_advert_reaches_the_peer_not_itself(make_fleet_client, observe
     b = make_fleet_client("robot_1")
     wait_for(lambda: a.connected and b.connected, what="both connected")
     wait_for(lambda: len(observer.on("/DSC/")) == 2, what="both subscribed")
+    b.note_own_position((4.0, 6.0))   # robot_1 stands in the same 10 m area as robot_0's SQUARE
     mine = make(robot="robot_0")
-    assert a.publish_footprint(mine)
-    wait_for(lambda: b.footprints, what="robot_1 hears robot_0")
-    assert b.footprints == [(mine, a.identity_id)]
-    (topic, data), = observer.on("ADV::" + OT)
-    assert topic == "coaty/3/fleet/ADV::%s/%s" % (OT, a.identity_id)
+    wait_for(lambda: a.publish_footprint(mine) and b.footprints, what="robot_1 hears robot_0")
+    assert b.footprints[0] == (mine, a.identity_id)
+    (topic, data) = observer.on("ADV::" + OT)[0]
+    assert topic == "coaty/3/fleet/ADV::%s.area_0_0/%s" % (OT, a.identity_id)
+    assert data["object"]["objectType"] == OT + ".area_0_0"
     assert data["object"]["objectId"] == a.footprint_object_id
     assert data["object"]["footprint"] == [list(p) for p in SQUARE]
     assert a.footprints == [] and a.counters()["echoes_suppressed"] >= 1
-    assert a.counters()["footprints_published"] == 1
-    assert a.counters()["footprint_bytes_published"] == len(fp.footprint_payload(mine, a.footprint_object_id))
+    published = a.counters()["footprints_published"]
+    assert a.counters()["footprint_bytes_published"] == published * len(
+        fp.footprint_payload(mine, a.footprint_object_id, OT + ".area_0_0"))
     assert "bytes_published" not in a.counters()      # obstacle traffic is counted apart
 
 
@@ -278,3 +280,100 @@ def test_every_order_of_adverts_keeps_the_newest_footprint_per_robot(delivered):
     expected = [newest[name] for name in sorted(newest)]
     assert [r.footprint for r in one.robots()] == expected
     assert [r.footprint for r in other.robots()] == expected
+
+
+# ------------------------------------------------------------------------------------------ areas
+
+def test_areas_are_floor_squares_and_their_object_types_parse_back():
+    assert fp.area_of((0.0, 0.0), 10.0) == (0, 0)
+    assert fp.area_of((9.999, -0.001), 10.0) == (0, -1)
+    assert fp.area_of((-10.0, 25.0), 10.0) == (-1, 2)
+    assert fp.area_object_type(OT, (-1, 2)) == OT + ".area_-1_2"
+    assert fp.areas_around((5.0, 5.0), 10.0) == {(x, y) for x in (-1, 0, 1) for y in (-1, 0, 1)}
+    for good in (OT, OT + ".area_0_0", OT + ".area_-12_7"):
+        assert fp.is_footprint_object_type(good, OT), good
+    for bad in ("org.other", OT + ".area_", OT + ".area_1", OT + ".area_1_2_3", OT + ".area_a_1",
+                OT + ".area_01_1", OT + ".area_+1_1", OT + ".area_1_ 1", OT + "X", OT + ".areax_1_1"):
+        assert not fp.is_footprint_object_type(bad, OT), bad
+
+
+@pytest.mark.parametrize("bad", [-1.0, 0.5, 1e5, float("nan"), float("inf"), True, "10"])
+def test_config_refuses_a_bad_area_size(bad):
+    with pytest.raises(ValueError, match="footprint_area_size"):
+        BridgeConfig("robot_0", footprint_area_size=bad)
+
+
+@pytest.mark.broker
+def test_a_robot_hears_the_areas_around_it_and_follows_its_own_moves(make_fleet_client, observer, wait_for):
+    """Adverts go out per 10 m area; each bridge hears the 3 x 3 areas around its own robot, so a
+    robot 25 m away is not heard until one of the two comes near; plain-objectType adverts (a peer
+    without areas) are heard anywhere."""
+    listener = make_fleet_client("robot_0")
+    near, far = make_fleet_client("robot_1"), make_fleet_client("robot_2")
+    wait_for(lambda: listener.connected and near.connected and far.connected and len(observer.on("/DSC/")) == 3,
+             what="all subscribed")
+    listener.note_own_position((5.0, 5.0))            # area (0, 0): hears x, y in [-10, 20)
+
+    def square(robot, x, y, stamp=1700000000.0):
+        return make(robot=robot, stamp=stamp, points=((x, y), (x + 0.6, y), (x + 0.6, y + 0.6), (x, y + 0.6)))
+
+    def heard():
+        return {f.robot for f, _ in listener.footprints}
+    # robot_1 at (14, 3) in area (1, 0): heard. robot_2 at (30, 5), area (3, 0): not heard.
+    wait_for(lambda: near.publish_footprint(square("robot_1", 14.0, 3.0)) and "robot_1" in heard(),
+             what="robot_0 hears robot_1 one area over")
+    for _ in range(20):
+        far.publish_footprint(square("robot_2", 30.0, 5.0))
+    near.publish_footprint(square("robot_1", 14.0, 3.0, stamp=1700000001.0))
+    wait_for(lambda: [f for f, _ in listener.footprints if f.stamp == 1700000001.0], what="the later robot_1 advert")
+    assert "robot_2" not in heard(), "an advert from 25 m away, three areas over, was heard"
+    assert len(observer.on(OT + ".area_3_0/")) == 20, "robot_2's adverts went out under its own area"
+
+    # robot_0 drives to (26, 5), area (2, 0): it now hears area 3, where robot_2 stands, and no
+    # longer area 0 (robot_1's area 1 stays in range)
+    listener.note_own_position((26.0, 5.0))
+    wait_for(lambda: far.publish_footprint(square("robot_2", 30.0, 5.0)) and "robot_2" in heard(),
+             what="robot_0 hears robot_2 after moving next to it")
+    # ... and no longer area 0: robot_1, gone back to (3, 3), is not heard; robot_2's later advert is
+    for _ in range(20):
+        near.publish_footprint(square("robot_1", 3.0, 3.0, stamp=1700000002.0))
+    far.publish_footprint(square("robot_2", 30.0, 5.0, stamp=1700000003.0))
+    wait_for(lambda: [f for f, _ in listener.footprints if f.stamp == 1700000003.0], what="robot_2's later advert")
+    assert not [f for f, _ in listener.footprints if f.stamp == 1700000002.0], "area (0, 0) still heard"
+    # a peer that knows no areas (plain objectType) is heard wherever it stands
+    observer.publish(str(Topic("fleet", "ADV", str(uuidlib.uuid4()), object_type=OT)),
+                     fp.footprint_payload(square("js_peer", 90.0, 90.0), str(uuidlib.uuid4())))
+    wait_for(lambda: "js_peer" in heard(), what="the plain-objectType advert")
+    assert listener.counters()["footprint_area_changes"] == 2
+    assert not any(k.startswith("dropped.") for k in listener.counters()), listener.counters()
+
+
+@pytest.mark.broker
+def test_without_areas_every_advert_is_heard_under_the_plain_object_type(make_fleet_client, observer, wait_for):
+    a = make_fleet_client("robot_0", footprint_area_size=0)
+    b = make_fleet_client("robot_1", footprint_area_size=0)
+    wait_for(lambda: a.connected and b.connected and len(observer.on("/DSC/")) == 2, what="both subscribed")
+    far = make(robot="robot_0", points=((500.0, 500.0), (500.5, 500.0), (500.5, 500.5)))
+    wait_for(lambda: a.publish_footprint(far) and b.footprints, what="robot_1 hears robot_0 500 m away")
+    assert observer.on("ADV::" + OT + "/"), "not under the plain objectType"
+    assert "footprint_area_changes" not in b.counters()
+
+
+def test_an_area_change_while_offline_is_subscribed_on_connect(broker, observer, wait_for):
+    """The areas follow the robot while the broker is away: the (re)connect subscribes the current ones."""
+    from coaty_bridge.client import CoatyBridgeClient
+    got = []
+    listener = CoatyBridgeClient(BridgeConfig("robot_0", broker_url=broker.url), lambda u, t: None,
+                                 on_footprint=lambda f, t: got.append(f))
+    listener.note_own_position((105.0, 5.0))     # before it ever connected
+    listener.start()
+    try:
+        wait_for(lambda: listener.connected and observer.on("/DSC/"), what="robot_0 subscribed")
+        sender = str(uuidlib.uuid4())
+        topic = str(Topic("fleet", "ADV", sender, object_type=OT + ".area_11_0"))
+        wait_for(lambda: observer.publish(topic, fp.footprint_payload(
+            make(robot="robot_5", points=((112.0, 1.0), (112.5, 1.0), (112.5, 1.5))), str(uuidlib.uuid4()),
+            OT + ".area_11_0")) or got,
+            what="robot_0 hears area (11, 0)")
+    finally:
+        listener.stop(timeout=0.5)

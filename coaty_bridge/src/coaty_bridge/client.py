@@ -76,6 +76,9 @@ class BridgeConfig:
     reconnect_max_delay: float = 30.0
     discover_window: float = 30.0
     authenticate_sources: bool = False
+    # metres; fleet-wide. Adverts go out per square of the map and each bridge hears the 3 x 3
+    # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet.
+    footprint_area_size: float = 10.0
     address: BrokerAddress = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -135,6 +138,11 @@ class BridgeConfig:
                 fail(name, "must be a positive number of seconds")
         if self.reconnect_max_delay < self.reconnect_min_delay:
             fail("reconnect_max_delay", "smaller than reconnect_min_delay")
+        area = self.footprint_area_size
+        if isinstance(area, bool) or not isinstance(area, (int, float)) or not (
+                area == 0 or footprints.MIN_AREA_SIZE <= area <= footprints.MAX_AREA_SIZE):
+            fail("footprint_area_size", "must be 0 (one area) or %g..%g m; all robots of a fleet need the same"
+                 % (footprints.MIN_AREA_SIZE, footprints.MAX_AREA_SIZE))
 
     @property
     def use_tls(self):
@@ -193,6 +201,9 @@ class CoatyBridgeClient:
             (subscription(ns, "DSC", two_way=True), qos),
             (subscription(ns, "RSV", two_way=True), qos),
         ]
+        # Footprint areas heard now (the 3 x 3 around the own robot); none until its position is known.
+        self._own_area = None
+        self._area_subscriptions = set()
         self._mqtt = _make_paho_client("Coaty" + self.identity_id.replace("-", "")[:18])
         self._mqtt.will_set(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=0)
         if config.use_tls:
@@ -276,10 +287,17 @@ class CoatyBridgeClient:
         return True
 
     def publish_footprint(self, footprint):
-        """Advertises this robot's footprint (a RobotFootprint). Not queued while offline: an old
-        pose is worth nothing. Returns False when it was not sent."""
-        payload = footprints.footprint_payload(footprint, self.footprint_object_id,
-                                               self.config.footprint_object_type)
+        """Advertises this robot's footprint (a RobotFootprint), under the objectType of the area
+        it stands in. Not queued while offline: an old pose is worth nothing. Returns False when
+        it was not sent."""
+        where = footprints.centroid(footprint.points)
+        self.note_own_position(where)
+        object_type, topic = self.config.footprint_object_type, self._footprint_topic
+        if self.config.footprint_area_size > 0:
+            object_type = footprints.area_object_type(
+                object_type, footprints.area_of(where, self.config.footprint_area_size))
+            topic = str(Topic(self.config.namespace, "ADV", self.identity_id, object_type=object_type))
+        payload = footprints.footprint_payload(footprint, self.footprint_object_id, object_type)
         if len(payload) > self.config.max_payload_bytes:
             self._count("dropped_outgoing.oversized")
             return False
@@ -288,8 +306,32 @@ class CoatyBridgeClient:
             return False
         self._count("footprints_published")
         self._count("footprint_bytes_published", len(payload))
-        self._send(self._footprint_topic, payload, queue=False)
+        self._send(topic, payload, queue=False)
         return True
+
+    def note_own_position(self, point):
+        """This robot stands at ``point`` (x, y in the footprint frame): hear the footprint adverts
+        of the 3 x 3 areas around it. Called with every own footprint, advertised or not."""
+        size = self.config.footprint_area_size
+        if size <= 0:
+            return
+        area = footprints.area_of(point, size)
+        if area == self._own_area:
+            return
+        base, ns = self.config.footprint_object_type, self.config.namespace
+        wanted = {subscription(ns, "ADV::" + footprints.area_object_type(base, a))
+                  for a in footprints.areas_around(point, size)}
+        with self._lock:
+            self._own_area = area
+            old, self._area_subscriptions = self._area_subscriptions, wanted
+            self._counters["footprint_area_changes"] += 1
+            if self._connected:
+                # new ones first: a robot on the way in is heard from the first advert the broker has for it
+                added, gone = sorted(wanted - old), sorted(old - wanted)
+                if added:
+                    self._mqtt.subscribe([(t, self._qos) for t in added])
+                if gone:
+                    self._mqtt.unsubscribe(gone)
 
     def _log_own(self, update):
         with self._lock:
@@ -387,8 +429,8 @@ class CoatyBridgeClient:
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             except OSError:
                 pass
-        client.subscribe(self._subscriptions)
         with self._lock:
+            client.subscribe(self._subscriptions + [(t, self._qos) for t in sorted(self._area_subscriptions)])
             self._connected = True
             if self._ever_connected:
                 self._counters["reconnects"] += 1
@@ -436,9 +478,9 @@ class CoatyBridgeClient:
             data = codec.parse_payload(payload, self.config.limits)
             if topic.event == "ADV" and topic.object_type == self.config.object_type:
                 self._deliver(codec.decode_advertise(data, self.config.object_type, self.config.limits), topic)
-            elif topic.event == "ADV" and topic.object_type == self.config.footprint_object_type:
-                self._deliver_footprint(
-                    footprints.decode_footprint_advertise(data, self.config.footprint_object_type), topic)
+            elif topic.event == "ADV" and topic.object_type is not None and footprints.is_footprint_object_type(
+                    topic.object_type, self.config.footprint_object_type):
+                self._deliver_footprint(footprints.decode_footprint_advertise(data, topic.object_type), topic)
             elif topic.event == "DSC":
                 self._answer_discover(topic, codec.decode_discover(data, self.identity_id,
                                                                    self.config.object_type))

@@ -29,7 +29,7 @@ LOG = logging.getLogger(__name__)
 _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
-           "reconnect_max_delay", "discover_window", "authenticate_sources")
+           "reconnect_max_delay", "discover_window", "authenticate_sources", "footprint_area_size")
 
 
 def msg_to_update(msg):
@@ -234,6 +234,7 @@ class BridgeNode:
             return
         now = rospy.get_time()
         self._own_footprint = (footprint, now)
+        self.client.note_own_position(centroid(footprint.points))
         # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
         # at most min_move (plus transport), not by a whole heartbeat period of driving.
         if self.footprint_config.advertise and self.footprint_config.min_move > 0.0:
