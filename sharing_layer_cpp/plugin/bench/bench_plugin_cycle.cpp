@@ -5,7 +5,7 @@
 // the figures are medians and the ratio ours / upstream is taken within the run.
 //
 // Built only where costmap_2d is installed; needs a ROS master (parameters, the shared-obstacle topic):
-//   rosrun sharing_layer_cpp bench_plugin_cycle [rounds]
+//   rosrun sharing_layer_cpp bench_plugin_cycle [rounds] [case 0..3, default all]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -134,6 +134,7 @@ int main(int argc, char** argv)
   ros::init(argc, argv, "bench_plugin_cycle");
   ros::NodeHandle nh;
   const int rounds = argc > 1 ? std::max(5, std::atoi(argv[1])) : 60;
+  const int only_case = argc > 2 ? std::atoi(argv[2]) : -1;  // one case (0..3) alone, e.g. under a profiler
   const Scene scene = sharing_layer::bench::makeScene();
   tf2_ros::Buffer tf;
   tf.setUsingDedicatedThread(true);
@@ -153,6 +154,11 @@ int main(int argc, char** argv)
   int index = 0;
   for (const Case& c : cases)
   {
+    if (only_case >= 0 && index != only_case)
+    {
+      ++index;
+      continue;
+    }
     const std::string tag = std::to_string(index++);
     setSource("upstream_" + tag, c.obstacle_range, c.raytrace_range);
     setSource("ours_" + tag, c.obstacle_range, c.raytrace_range);

@@ -265,6 +265,20 @@ TEST(PluginLayer, ASourceThatMarksAndClearsMatchesObstacleLayer)
   maps.scanFrom(5.6, 4.7, ring(360, 0.01), "second scan from (5.6, 4.7), clearing the first's marks");
 }
 
+TEST(PluginLayer, CombinationMethodOverwriteMatchesObstacleLayer)
+{
+  // combination_method 0 (updateWithOverwrite) with unknown space tracked, so that the layer holds all three
+  // kinds of cell: free, lethal and NO_INFORMATION, which must leave the master alone.
+  for (const std::string layer : { "~upstream_overwrite/", "~ours_overwrite/" })
+  {
+    ros::param::set(layer + "combination_method", 0);
+    ros::param::set(layer + "track_unknown_space", true);
+  }
+  SideBySide maps("overwrite", { { "scan", true, true, 2.5, 3.0 } }, false, 200);
+  maps.scanFrom(5.0, 5.0, ring(360, 0.0), "first scan from (5, 5)");
+  maps.scanFrom(5.6, 4.7, ring(360, 0.01), "second scan from (5.6, 4.7)");
+}
+
 TEST(PluginLayer, TrackUnknownSpaceKeepsUnseenCellsUnknownAsObstacleLayerDoes)
 {
   // track_unknown_space: the layer's grid starts NO_INFORMATION and keeps it where no beam passed; updateWithMax
