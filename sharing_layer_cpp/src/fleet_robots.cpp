@@ -74,19 +74,39 @@ void FleetRobots::check(const FleetRobot& robot)
   }
 }
 
-void FleetRobots::count(const std::vector<std::uint32_t>& cells, int delta)
+void FleetRobots::include(const std::vector<std::uint32_t>& cells)
 {
-  if (count_.empty())
+  if (excluded_.empty())
   {
-    if (delta < 0)
-    {
-      return;
-    }
-    count_.assign(geometry_.cellCount(), 0);
+    excluded_.assign(geometry_.cellCount());
   }
   for (std::uint32_t index : cells)
   {
-    count_[index] = static_cast<std::uint16_t>(count_[index] + delta);
+    excluded_.set(index);
+  }
+}
+
+void FleetRobots::release(const std::vector<std::uint32_t>& cells)
+{
+  if (excluded_.empty())
+  {
+    return;
+  }
+  for (std::uint32_t index : cells)
+  {
+    excluded_.reset(index);
+  }
+  // One bit per cell instead of a count of the robots over it: where two footprints overlap, the other robot's
+  // cells are set again (a few hundred cells per robot in view).
+  for (const auto& entry : cells_)
+  {
+    if (&entry.second != &cells)
+    {
+      for (std::uint32_t index : entry.second)
+      {
+        excluded_.set(index);
+      }
+    }
   }
 }
 
@@ -154,9 +174,9 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   auto found = cells_.find(robot.name);
   if (found != cells_.end())
   {
-    count(found->second, -1);
+    release(found->second);
   }
-  count(cells, +1);
+  include(cells);
   cells_[robot.name] = std::move(cells);
   robots_[robot.name] = robot;
 }
@@ -186,7 +206,7 @@ bool FleetRobots::forget(const std::string& name)
   {
     return false;
   }
-  count(found->second, -1);
+  release(found->second);
   cells_.erase(found);
   robots_.erase(name);
   motion_.erase(name);
@@ -198,7 +218,7 @@ void FleetRobots::setGeometry(const GridGeometry& geometry)
   const std::map<std::string, FleetRobot> known = robots_;
   const std::map<std::string, std::pair<double, double>> motions = motion_;
   clear();
-  count_.clear();  // sized for the old grid
+  excluded_.release();  // sized for the old grid
   geometry_ = geometry;
   for (const auto& entry : known)
   {
@@ -211,7 +231,13 @@ void FleetRobots::clear()
 {
   for (const auto& entry : cells_)
   {
-    count(entry.second, -1);
+    for (std::uint32_t index : entry.second)
+    {
+      if (!excluded_.empty())
+      {
+        excluded_.reset(index);
+      }
+    }
   }
   cells_.clear();
   robots_.clear();

@@ -143,8 +143,14 @@ SharingCore::SharingCore(const GridGeometry& geometry, const LayerParams& params
   obstacles_ = CostGrid(GridGeometry(geometry.resolution, geometry.origin_x, geometry.origin_y, geometry.size_x,
                                      geometry.size_y),
                         FREE_SPACE);
-  cell_info_.assign(geometry.cellCount(), 0);
+  monitored_.assign(geometry.cellCount());
   cell_flags_.assign(geometry.cellCount(), 0);
+}
+
+std::size_t SharingCore::perCellBytes() const
+{
+  return cell_flags_.capacity() + monitored_.bytes() + static_occupied_.bytes() + static_unknown_.bytes() +
+         static_filter_.gridBytes() + fleet_robots_.gridBytes();
 }
 
 void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count)
@@ -159,9 +165,15 @@ void SharingCore::setStaticMap(const std::uint8_t* costs, std::size_t cost_count
 template <class IsSet>
 void SharingCore::setStaticSource(std::uint8_t bit, IsSet is_set)
 {
-  for (std::size_t i = 0; i < cell_info_.size(); ++i)
+  BitGrid& source = bit == kStaticOccupied ? static_occupied_ : static_unknown_;
+  const std::size_t n = geometry().cellCount();
+  source.assign(n);
+  for (std::size_t i = 0; i < n; ++i)
   {
-    cell_info_[i] = static_cast<std::uint8_t>((cell_info_[i] & ~bit) | (is_set(i) ? bit : 0));
+    if (is_set(i))
+    {
+      source.set(i);
+    }
   }
   static_source_bits_ |= bit;
 }
@@ -172,7 +184,7 @@ void SharingCore::setUnknownMap(const std::uint8_t* unknown, std::size_t cell_co
   {
     if (static_source_bits_ & kStaticUnknown)
     {
-      setStaticSource(kStaticUnknown, [](std::size_t) { return false; });
+      static_unknown_.release();
       static_source_bits_ &= ~kStaticUnknown;
     }
   }
@@ -195,9 +207,14 @@ void SharingCore::rebuildStaticFilter()
     static_filter_ = StaticMapFilter();
     return;
   }
-  // Occupied or unknown: the static bits lie above kMonitored, so any of them makes the value >= kStaticOccupied.
-  static_filter_ = StaticMapFilter(geometry(), cell_info_.data(), cell_info_.size(), params_.static_tolerance,
-                                   kStaticOccupied);
+  // Occupied or unknown (a byte per cell only while the filter is built).
+  std::vector<std::uint8_t> blocked(geometry().cellCount(), 0);
+  for (std::size_t i = 0; i < blocked.size(); ++i)
+  {
+    blocked[i] = (!static_occupied_.empty() && static_occupied_.test(i)) ||
+                 (!static_unknown_.empty() && static_unknown_.test(i));
+  }
+  static_filter_ = StaticMapFilter(geometry(), blocked.data(), blocked.size(), params_.static_tolerance, 1);
   dropStaticCandidates();
 }
 
@@ -232,10 +249,10 @@ void SharingCore::markMonitored(const CellRect& rect, bool monitored)
   const GridGeometry& g = geometry();
   for (int y = rect.min_y; y <= rect.max_y; ++y)
   {
-    std::uint8_t* row = cell_info_.data() + static_cast<std::size_t>(y) * g.size_x;
+    const std::size_t row = static_cast<std::size_t>(y) * g.size_x;
     for (int x = rect.min_x; x <= rect.max_x; ++x)
     {
-      row[x] = static_cast<std::uint8_t>(monitored ? (row[x] | kMonitored) : (row[x] & ~kMonitored));
+      monitored_.set(row + static_cast<std::size_t>(x), monitored);
     }
   }
 }
@@ -1467,7 +1484,6 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
   // Allocate first: nothing changes when the new grid cannot be had. A caller's buffer holds the moved grid
   // already (the old one may be gone).
   CostGrid obstacles = costs != nullptr ? CostGrid::view(geometry, costs, default_value) : CostGrid(geometry, FREE_SPACE);
-  std::vector<std::uint8_t> cell_info(geometry.cellCount(), 0);
   std::vector<std::uint8_t> cell_flags(geometry.cellCount(), 0);
 
   std::vector<std::uint32_t> shareable;
@@ -1517,7 +1533,9 @@ MoveReport SharingCore::moveGrid(const GridGeometry& geometry, bool keep_observa
 
   obstacles_ = std::move(obstacles);
   shareable_.swap(shareable);
-  cell_info_.swap(cell_info);  // no static sources on the new grid (set again), monitoring marked below
+  monitored_.assign(geometry.cellCount());  // marked below
+  static_occupied_.release();                 // no static sources on the new grid (set again)
+  static_unknown_.release();
   cell_flags_.swap(cell_flags);  // a fresh scratch: every present cell is flagged again at the next scan
   flagged_cells_.clear();
   shared_flags_stale_ = true;

@@ -50,7 +50,7 @@ StaticMapFilter::StaticMapFilter(const GridGeometry& geometry, const std::uint8_
       out[x] = count > 0;
     }
   }
-  near_static_.assign(geometry.cellCount(), 0);
+  near_static_.assign(geometry.cellCount());
   std::vector<int> counts(sx, 0);
   for (int y = 0; y < std::min(tolerance, sy); ++y)
   {
@@ -77,10 +77,13 @@ StaticMapFilter::StaticMapFilter(const GridGeometry& geometry, const std::uint8_
         counts[x] -= sub[x];
       }
     }
-    std::uint8_t* out = near_static_.data() + static_cast<std::size_t>(y) * sx;
+    const std::size_t row = static_cast<std::size_t>(y) * sx;
     for (int x = 0; x < sx; ++x)
     {
-      out[x] = counts[x] > 0;
+      if (counts[x] > 0)
+      {
+        near_static_.set(row + static_cast<std::size_t>(x));
+      }
     }
   }
 }

@@ -419,3 +419,29 @@ TEST(Monitoring, AnExpiredObstacleLeavesTheRectangleOfAnOverlappingOneMonitored)
   core.processScan(scan, 1.1);
   EXPECT_FALSE(core.shareableCells().empty()) << "with no obstacle left the block's face is this robot's candidate";
 }
+
+TEST(OneGrid, SharingAddsAtMostOneAndFiveEighthsBytesPerCellWithEveryPerCellFactInUse)
+{
+  // Issue 13: ObstacleLayer keeps one byte per cell; what sharing adds is one byte of flags (present shared cells,
+  // shareable, remembered, steady, a scan's own evidence bits) and a bit per cell for each yes/no fact: inside a
+  // monitored rectangle, a static wall, unknown in the map, near either (the static filter), under a fleet robot.
+  SharingCore core = makeCore();
+  const GridGeometry g = core.geometry();
+  const std::size_t cells = g.cellCount();
+  std::vector<std::uint8_t> walls(cells, FREE_SPACE), unknown(cells, 0);
+  walls[0] = LETHAL_OBSTACLE;
+  unknown[cells - 1] = 1;
+  core.setStaticMap(walls.data(), cells);
+  core.setUnknownMap(unknown.data(), cells);
+  FleetRobot robot;
+  robot.name = "robot_1";
+  robot.footprint = { { 1.0, 1.0 }, { 1.5, 1.0 }, { 1.5, 1.5 }, { 1.0, 1.5 } };
+  robot.stamp = 0.0;
+  core.fleetRobots().update(robot);
+  ASSERT_TRUE(core.fleetRobots().excludes(g.getIndex(25, 25)));
+  // 1 byte + 5 bits per cell, and the bit grids' rounding to 64-bit words
+  const std::size_t limit = cells + 5 * ((cells + 63) / 64) * 8;
+  EXPECT_LE(core.perCellBytes(), limit) << core.perCellBytes() / static_cast<double>(cells) << " bytes per cell";
+  EXPECT_GE(core.perCellBytes(), cells) << "the flags byte is counted";
+  RecordProperty("bytes_per_cell_x1000", static_cast<int>(1000 * core.perCellBytes() / cells));
+}

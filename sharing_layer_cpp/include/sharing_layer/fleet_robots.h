@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "sharing_layer/bit_grid.h"
 #include "sharing_layer/grid_geometry.h"
 
 namespace sharing_layer
@@ -83,7 +84,9 @@ public:
   std::vector<std::string> expire(double now_s);
 
   /// @return whether a cell lies within a known robot's footprint plus margin (no bounds check)
-  bool excludes(std::uint32_t index) const { return !count_.empty() && count_[index] != 0; }
+  bool excludes(std::uint32_t index) const { return !excluded_.empty() && excluded_.test(index); }
+  /// @return bytes it keeps per grid (a bit per cell once a robot was known)
+  std::size_t gridBytes() const { return excluded_.bytes(); }
   /// @return the excluded cells, sorted
   std::vector<std::uint32_t> excludedCells() const;
   /// @return names of the known robots who cover a cell, sorted
@@ -103,14 +106,17 @@ public:
   static void check(const FleetRobot& robot);
 
 private:
-  void count(const std::vector<std::uint32_t>& cells, int delta);
+  /// @brief Excludes cells (a robot's new footprint).
+  void include(const std::vector<std::uint32_t>& cells);
+  /// @brief Ends the exclusion of a robot's cells (its entry in cells_), except where another robot covers them.
+  void release(const std::vector<std::uint32_t>& cells);
 
   GridGeometry geometry_;
   FleetRobotParams params_;
   std::map<std::string, FleetRobot> robots_;
   std::map<std::string, std::vector<std::uint32_t>> cells_;   ///< per robot: the cells it excludes
   std::map<std::string, std::pair<double, double>> motion_;   ///< per robot: its move between its last two adverts
-  std::vector<std::uint16_t> count_;  ///< per cell: how many robots cover it (allocated on the first robot)
+  BitGrid excluded_;  ///< per cell: within a known robot's footprint plus margin (allocated on the first robot)
 };
 
 }  // namespace sharing_layer

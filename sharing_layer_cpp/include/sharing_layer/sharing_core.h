@@ -303,6 +303,10 @@ public:
   FleetRobots& fleetRobots() { return fleet_robots_; }
   const FleetRobots& fleetRobots() const { return fleet_robots_; }
 
+  /// @return bytes kept per grid cell besides the obstacle grid itself, summed over the grid: the per-cell flags,
+  /// the monitored rectangles, the static sources and filter, the fleet robots (issue 13: what sharing adds to
+  /// ObstacleLayer's one byte per cell)
+  std::size_t perCellBytes() const;
   const CostGrid& obstacleGrid() const { return obstacles_; }
   CostGrid& obstacleGrid() { return obstacles_; }
   /// @return the current shareable cells, sorted
@@ -314,7 +318,7 @@ public:
 private:
   void trackShareable(const ScanTouch& touch, const Observation& observation, double obstacle_range);
   void rebuildStaticFilter();
-  /// @brief Sets `bit` of cell_info_ where is_set(index), clears it elsewhere.
+  /// @brief Sets the static source `bit` (kStaticOccupied or kStaticUnknown) where is_set(index), clears it elsewhere.
   template <class IsSet>
   void setStaticSource(std::uint8_t bit, IsSet is_set);
   void dropStaticCandidates();
@@ -331,10 +335,10 @@ private:
   std::vector<std::size_t> planAhead(double robot_x, double robot_y, double reach) const;
   bool nearPlan(std::uint32_t index, const std::vector<std::size_t>& ahead) const;
   void markDirty(const std::vector<std::uint32_t>& cells);
-  bool insideMonitoredRectangle(std::uint32_t index) const { return (cell_info_[index] & kMonitored) != 0; }
-  /// @brief Sets (or clears) kMonitored over a rectangle of cells.
+  bool insideMonitoredRectangle(std::uint32_t index) const { return monitored_.test(index); }
+  /// @brief Sets (or clears) monitored_ over a rectangle of cells.
   void markMonitored(const CellRect& rect, bool monitored);
-  /// @brief After an obstacle left: clears kMonitored over its rectangle but where another still covers it.
+  /// @brief After an obstacle left: clears monitored_ over its rectangle but where another still covers it.
   void unmarkMonitored(const CellRect& rect);
   /// @brief The union of the monitored rectangles: an obstacle's rectangle only grows (merging), here as in
   /// the handler, so its monitoring covers every cell the fleet added to it.
@@ -373,14 +377,15 @@ private:
   StaticMapFilter static_filter_;
   TriggerDebounce trigger_;
   TriggerDebounce plan_trigger_;
-  /// Per cell, one byte: kMonitored where a shared obstacle's rectangle covers it, and what the static filter is
-  /// built from (kept to rebuild it when one of them changes): kStaticOccupied where the last setStaticMap was a
-  /// wall, kStaticUnknown where the last setUnknownMap was unknown.
-  std::vector<std::uint8_t> cell_info_;
+  /// Per cell, one bit each: where a shared obstacle's rectangle covers it, and what the static filter is built
+  /// from (kept to rebuild it when one of them changes; allocated once given): a wall in the last setStaticMap,
+  /// unknown in the last setUnknownMap.
+  BitGrid monitored_;
+  BitGrid static_occupied_;
+  BitGrid static_unknown_;
   std::uint8_t static_source_bits_ = 0;  ///< the static sources given so far
-  static constexpr std::uint8_t kMonitored = 1;
-  static constexpr std::uint8_t kStaticOccupied = 2;
-  static constexpr std::uint8_t kStaticUnknown = 4;
+  static constexpr std::uint8_t kStaticOccupied = 1;
+  static constexpr std::uint8_t kStaticUnknown = 2;
   std::unordered_map<std::uint32_t, RememberedCell> memory_;
   std::vector<std::pair<double, double>> plan_;
   std::vector<std::uint32_t> last_new_marked_;  ///< non-static cells the last scan marked that were not lethal before

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "sharing_layer/bit_grid.h"
 #include "sharing_layer/grid_geometry.h"
 
 namespace sharing_layer
@@ -30,12 +31,14 @@ public:
                   std::uint8_t occupied_threshold, const std::uint8_t* unknown = nullptr);
 
   /// @return whether the cell is static within the tolerance (false when no map was given)
-  bool isStatic(std::uint32_t index) const { return !near_static_.empty() && near_static_[index] != 0; }
+  bool isStatic(std::uint32_t index) const { return !near_static_.empty() && near_static_.test(index); }
   int tolerance() const { return tolerance_; }
   bool hasMap() const { return !near_static_.empty(); }
+  /// @return bytes it keeps per grid (a bit per cell once a map was given)
+  std::size_t gridBytes() const { return near_static_.bytes(); }
 
 private:
-  std::vector<std::uint8_t> near_static_;
+  BitGrid near_static_;  ///< a bit per cell: it is kept for the map's lifetime
   int tolerance_ = 0;
 };
 
