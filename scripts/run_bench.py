@@ -42,9 +42,15 @@ BENCHMARKS = {
 }
 
 
+def script_of(command):
+    """The benchmark's program: the script a Python command runs, else the binary itself (the arguments after it,
+    such as fleet's --chart PATH, are not the program)."""
+    return command[1] if command[0] == sys.executable and len(command) > 1 else command[0]
+
+
 def run(name):
     command, what = BENCHMARKS[name]
-    script = command[-1]
+    script = script_of(command)
     print("=== bench %s: %s" % (name, what), flush=True)
     if not os.path.exists(script):
         print("bench %s: %s does not exist (not built, or not written yet)" % (name, script), flush=True)
