@@ -24,11 +24,14 @@ def test_obstacle_reaches_the_peer_intact_and_is_not_echoed(make_client, make_up
     assert a.publish_obstacle(update)
     wait_for(lambda: b.received_updates, what="delivery to robot_1")
     assert b.received_updates == [update]
+    # The observer and robot_0's own echo are other deliveries of the same publish: under load they
+    # can come after robot_1's, so wait for them rather than assume they are already in.
+    wait_for(lambda: observer.on("ADV::" + OT), what="the advertise at the observer")
+    wait_for(lambda: a.counters().get("echoes_suppressed", 0) >= 1, what="robot_0's own echo")
     adv = observer.on("ADV::" + OT)
     assert len(adv) == 1 and adv[0][0] == "coaty/3/fleet/ADV::%s/%s" % (OT, a.identity_id)
     assert adv[0][1]["object"]["objectId"] == update.uuid
     assert a.received_updates == []
-    assert a.counters()["echoes_suppressed"] >= 1
 
 
 def assert_aged(got, want, held_for):
