@@ -345,7 +345,9 @@ void SharingLayer::onFootprintChanged()
     return;
   }
   std::lock_guard<std::mutex> lock(core_mutex_);
-  if (inscribed != params_.inscribed_radius)
+  // costmap_2d sets the footprint more than once at start-up (padding), with radii that differ only in the
+  // last bits: log a change a person would see.
+  if (std::abs(inscribed - params_.inscribed_radius) > 1e-6)
   {
     ROS_INFO("SharingLayer %s (%s): plan trigger within the footprint's inscribed radius %.3f m of the plan",
              name_.c_str(), params_.robot_name.c_str(), inscribed);
