@@ -7,7 +7,8 @@ import rospy
 
 import sim_test_helpers as h
 from fleet_sim.sim import LocalisationError, Simulation
-from fleet_sim.sim_node import SimNode, build_messages
+from fleet_sim.errors import SimError
+from fleet_sim.sim_node import SimNode, _number_param, build_messages, stage_ros_order
 from fleet_sim.world import load_world
 
 
@@ -68,3 +69,38 @@ def test_willow_map_to_odom_is_the_minus_90_degree_turn():
     t = _tfs(out)[("map", "robot_0/odom")]
     assert _yaw(t.rotation) == pytest.approx(-math.pi / 2)
     assert (t.translation.x, t.translation.y) == pytest.approx((0.0, 0.0), abs=1e-9)
+
+
+def test_map_to_odom_is_stamped_ahead_by_the_transform_tolerance_as_fake_localization_does():
+    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None), raycast=h.raycaster())
+    sim.step()
+    stamp = rospy.Time.from_sec(sim.time)
+    out = build_messages(sim, ["robot_0/", "robot_1/"], stamp, False, transform_tolerance=0.1)
+    for t in out.tf.transforms:
+        ahead = (t.header.stamp - stamp).to_sec()
+        if t.header.frame_id == "map":
+            assert ahead == pytest.approx(0.1), t.child_frame_id
+        else:
+            assert ahead == 0.0, (t.header.frame_id, t.child_frame_id)
+    assert [o.header.stamp for o in out.odoms] == [stamp, stamp]
+
+
+def test_a_step_is_published_in_stageros_order_with_the_clock_last():
+    class Pubs:
+        odom_pubs, gt_pubs = ["odom0", "odom1"], ["gt0", "gt1"]
+        scan_pubs = [["scan0"], ["scan1"]]
+        tf_pub, clock_pub = "tf", "clock"
+    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None), raycast=h.raycaster())
+    sim.step()
+    stamp = rospy.Time.from_sec(sim.time)
+    out = build_messages(sim, ["robot_0/", "robot_1/"], stamp, True)
+    order = list(stage_ros_order(Pubs, out, stamp))
+    assert [pub for pub, _ in order] == ["odom0", "gt0", "scan0", "odom1", "gt1", "scan1", "tf", "clock"]
+    assert order[-1][1].clock == stamp and order[-2][1] is out.tf
+
+
+@pytest.mark.parametrize("value", [-0.1, float("nan"), "soon", None])
+def test_a_bad_transform_tolerance_is_refused_naming_it(monkeypatch, value):
+    monkeypatch.setattr(rospy, "get_param", lambda name, default=None: value)
+    with pytest.raises(SimError, match=r"~transform_tolerance"):
+        _number_param("~transform_tolerance", 0.1, minimum=0.0)

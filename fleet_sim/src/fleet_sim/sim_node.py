@@ -10,6 +10,8 @@ Parameters (private):
   ~robot_prefix (str="robot_%d")     namespace of robot N; "" for none
   ~single_robot_no_prefix (bool=false) like stage_ros: no namespace with one robot
   ~watchdog_timeout (float=0.2)      s without cmd_vel before a robot stops
+  ~transform_tolerance (float=0.1)   s that map→odom is stamped ahead of the simulated time, as
+                                     fake_localization's (and amcl's) transform_tolerance does
   ~laser_rate (float=10)             Hz
   ~raycast_resolution (float)        grid cell size for lasers/collisions (default: world resolution)
   ~map_yaml | ~map_image + ~map_resolution   the map served to the graph; used to derive
@@ -20,7 +22,8 @@ Parameters (private):
                                      {offset: [dx, dy, dyaw], std_xy: m, std_yaw: rad}
 Topics per robot (prefix robot_N/): cmd_vel (in), odom, base_pose_ground_truth,
 base_scan (base_scan_K with several rangers); tf odom→base_link→base_laser_link and
-map→odom; /clock. Services: ~add_block, ~move_block, ~remove_block, ~snapshot.
+map→odom; /clock, published last in each step, after the step's odometry, scans and tf, as
+stageros does. Services: ~add_block, ~move_block, ~remove_block, ~snapshot.
 """
 import logging
 import math
@@ -111,6 +114,10 @@ class SimNode:
                               _number_param("~raycast_resolution", 0.02, minimum=1e-3),
                               map_from_world=map_from_world)
         self._apply_localisation_params()
+        # move_base looks map→odom up at the newest sim time it has heard; without the lead that
+        # fake_localization gives it, a lookup between two steps fails with an extrapolation error
+        # and the controller loses a cycle.
+        self.transform_tolerance = _number_param("~transform_tolerance", 0.1, minimum=0.0)
         self.lock = threading.Lock()
         prefix = rospy.get_param("~robot_prefix", "robot_%d")
         if rospy.get_param("~single_robot_no_prefix", False) and len(world.robots) == 1:
@@ -261,14 +268,22 @@ class SimNode:
     def _publish(self, scans):
         with self.lock:
             stamp = rospy.Time.from_sec(self.sim.time)
-            self.clock_pub.publish(Clock(clock=stamp))
-            out = build_messages(self.sim, self.names, stamp, scans)
-        for i, (odom, scan_msgs) in enumerate(zip(out.odoms, out.scans)):
-            self.odom_pubs[i].publish(odom)
-            self.gt_pubs[i].publish(odom)   # perfect odometry: ground truth is the same pose
-            for k, scan in scan_msgs:
-                self.scan_pubs[i][k].publish(scan)
-        self.tf_pub.publish(out.tf)
+            out = build_messages(self.sim, self.names, stamp, scans, self.transform_tolerance)
+        for publisher, message in stage_ros_order(self, out, stamp):
+            publisher.publish(message)
+
+
+def stage_ros_order(pubs, out, stamp):
+    """(publisher, message) of one step in stageros's order: each robot's odometry, ground truth and
+    scans, then tf, and the clock last, so that a node woken by the new time finds the transforms of
+    that time already there. ``pubs`` holds odom_pubs, gt_pubs, scan_pubs, tf_pub and clock_pub."""
+    for i, (odom, scan_msgs) in enumerate(zip(out.odoms, out.scans)):
+        yield pubs.odom_pubs[i], odom
+        yield pubs.gt_pubs[i], odom   # perfect odometry: ground truth is the same pose
+        for k, scan in scan_msgs:
+            yield pubs.scan_pubs[i][k], scan
+    yield pubs.tf_pub, out.tf
+    yield pubs.clock_pub, Clock(clock=stamp)
 
 
 class Messages:
@@ -280,8 +295,9 @@ class Messages:
         self.tf = TFMessage()
 
 
-def build_messages(sim, names, stamp, with_scans):
-    """stage_ros messages for the current state (pure function of the simulation)."""
+def build_messages(sim, names, stamp, with_scans, transform_tolerance=0.0):
+    """stage_ros messages for the current state (pure function of the simulation); map→odom is
+    stamped transform_tolerance s after the others, as fake_localization stamps it."""
     out = Messages()
     transforms = out.tf.transforms
     for i, r in enumerate(sim.robots):
@@ -317,7 +333,8 @@ def build_messages(sim, names, stamp, with_scans):
                 scan.ranges = r.scans[k].tolist()
                 scans.append((k, scan))
         out.scans.append(scans)
-        transforms.append(_tf(stamp, "map", ns + "odom", sim.map_to_odom(i)))
+        transforms.append(_tf(stamp + rospy.Duration.from_sec(transform_tolerance), "map", ns + "odom",
+                              sim.map_to_odom(i)))
     return out
 
 
