@@ -24,3 +24,10 @@ def raycaster():
     """The C++ core's raycaster (the simulator has no other); fails loudly if it is not built."""
     from fleet_sim.raycast import core_raycaster
     return core_raycaster()
+
+
+def room_sim(**kwargs):
+    """A Simulation of test/data/room.world (10 m x 8 m, two robots) with the core's raycaster."""
+    from fleet_sim.sim import Simulation
+    from fleet_sim.world import load_world
+    return Simulation(load_world(os.path.join(DATA, "room.world"), log=lambda *a: None), raycast=raycaster(), **kwargs)

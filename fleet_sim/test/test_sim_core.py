@@ -22,8 +22,7 @@ CELL = 0.02
 FRONT, LEFT, RIGHT = 90, 180, 0
 
 
-def room(**kwargs):
-    return Simulation(load_world(ROOM, log=lambda *a: None), raycast=h.raycaster(), **kwargs)
+room = h.room_sim
 
 
 def drive(sim, index, vx, vy, wz, steps):

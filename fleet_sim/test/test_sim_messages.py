@@ -1,6 +1,5 @@
 """The stage_ros messages the node publishes, built without a ROS master."""
 import math
-import os
 
 import pytest
 import rospy
@@ -21,8 +20,7 @@ def _tfs(out):
 
 
 def test_room_messages_have_stage_ros_names_and_geometry():
-    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None),
-                     raycast=h.raycaster(), localisation={1: LocalisationError(dx=0.2)})
+    sim = h.room_sim(localisation={1: LocalisationError(dx=0.2)})
     sim.set_cmd_vel(0, 0.5, 0.0, 0.1)
     sim.step()
     names = [SimNode._prefix("robot_%d", i) for i in range(2)]
@@ -72,7 +70,7 @@ def test_willow_map_to_odom_is_the_minus_90_degree_turn():
 
 
 def test_map_to_odom_is_stamped_ahead_by_the_transform_tolerance_as_fake_localization_does():
-    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None), raycast=h.raycaster())
+    sim = h.room_sim()
     sim.step()
     stamp = rospy.Time.from_sec(sim.time)
     out = build_messages(sim, ["robot_0/", "robot_1/"], stamp, False, transform_tolerance=0.1)
@@ -90,7 +88,7 @@ def test_a_step_is_published_in_stageros_order_with_the_clock_last():
         odom_pubs, gt_pubs = ["odom0", "odom1"], ["gt0", "gt1"]
         scan_pubs = [["scan0"], ["scan1"]]
         tf_pub, clock_pub = "tf", "clock"
-    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None), raycast=h.raycaster())
+    sim = h.room_sim()
     sim.step()
     stamp = rospy.Time.from_sec(sim.time)
     out = build_messages(sim, ["robot_0/", "robot_1/"], stamp, True)

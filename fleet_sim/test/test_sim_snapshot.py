@@ -1,5 +1,4 @@
 """Headless PNG snapshots: walls, blocks, robots in their colours, laser rays."""
-import os
 
 import numpy as np
 from PIL import Image
@@ -18,8 +17,7 @@ def _pixel(img, sim, x, y, ppm):
 
 
 def test_room_snapshot_shows_walls_block_robots_and_rays(tmp_path):
-    sim = Simulation(load_world(os.path.join(h.DATA, "room.world"), log=lambda *a: None),
-                     raycast=h.raycaster())
+    sim = h.room_sim()
     sim.add_block("crate", 3.0, 0.0, 0.0, 0.4, 0.4)
     path = str(tmp_path / "room.png")
     size = save_png(sim, path, lasers=True, pixels_per_metre=20)

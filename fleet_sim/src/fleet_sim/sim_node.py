@@ -300,6 +300,7 @@ def build_messages(sim, names, stamp, with_scans, transform_tolerance=0.0):
     stamped transform_tolerance s after the others, as fake_localization stamps it."""
     out = Messages()
     transforms = out.tf.transforms
+    map_odom_stamp = stamp + rospy.Duration.from_sec(transform_tolerance)
     for i, r in enumerate(sim.robots):
         ns = names[i]
         odom = Odometry()
@@ -333,8 +334,7 @@ def build_messages(sim, names, stamp, with_scans, transform_tolerance=0.0):
                 scan.ranges = r.scans[k].tolist()
                 scans.append((k, scan))
         out.scans.append(scans)
-        transforms.append(_tf(stamp + rospy.Duration.from_sec(transform_tolerance), "map", ns + "odom",
-                              sim.map_to_odom(i)))
+        transforms.append(_tf(map_odom_stamp, "map", ns + "odom", sim.map_to_odom(i)))
     return out
 
 

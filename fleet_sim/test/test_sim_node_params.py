@@ -1,0 +1,34 @@
+"""The simulator node refuses a bad parameter at start-up with an error naming it (a real fleet_sim
+process under roslaunch with its own master; test_sim_messages checks the same rule without one)."""
+import os
+import re
+import socket
+import subprocess
+
+import sim_test_helpers as h
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_negative_transform_tolerance_stops_the_node_naming_the_parameter(tmp_path):
+    launch = tmp_path / "sim.launch"
+    launch.write_text("""<launch>
+  <param name="/use_sim_time" value="true"/>
+  <node pkg="fleet_sim" type="fleet_sim" name="fleet_sim" required="true" output="screen">
+    <param name="world" value="%s"/>
+    <param name="transform_tolerance" value="-0.5"/>
+  </node>
+</launch>
+""" % os.path.join(h.DATA, "room.world"))
+    port = free_port()
+    env = dict(os.environ, ROS_IP="127.0.0.1", ROS_HOSTNAME="127.0.0.1",
+               ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_HOME=str(tmp_path))
+    proc = subprocess.run(["roslaunch", "-p", str(port), str(launch)], capture_output=True, text=True,
+                          env=env, timeout=120)
+    out = proc.stdout + proc.stderr
+    assert re.search(r"fleet_sim cannot start: parameter ~transform_tolerance must be >= 0, got -0\.5", out), out
+    assert re.search(r"REQUIRED process \[fleet_sim-\d+\] has died", out), out
