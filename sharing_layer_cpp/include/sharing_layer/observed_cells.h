@@ -1,0 +1,176 @@
+#ifndef SHARING_LAYER_OBSERVED_CELLS_H
+#define SHARING_LAYER_OBSERVED_CELLS_H
+
+#include <algorithm>
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "sharing_layer/bit_grid.h"
+#include "sharing_layer/cell_flags.h"
+#include "sharing_layer/cost_grid.h"
+#include "sharing_layer/fleet_robots.h"
+#include "sharing_layer/scan_update.h"
+#include "sharing_layer/shared_obstacle.h"
+#include "sharing_layer/static_mask.h"
+#include "sharing_layer/subsection.h"
+
+namespace sharing_layer
+{
+/// @brief A recently marked non-static cell (trigger memory).
+struct RememberedCell
+{
+  double time = 0.0;            ///< last time a scan marked it, seconds
+  float sensor_x = 0.0f;        ///< where the sensor was then (grid frame, m)
+  float sensor_y = 0.0f;
+  FreeStreak free;              ///< evidence of free space since the last sign of occupancy
+  /// Scans in a row that marked it (a scan whose beam passed through it without marking it ends the row), and
+  /// the time of the first of them: a shared obstacle grows only over cells marked steadily (growInto), not
+  /// over the cells next to a face that localisation noise marks now and then.
+  std::uint16_t marks = 0;
+  double marked_since = 0.0;
+};
+
+/// @brief What the cells a scan marks are checked against before this robot may share them.
+struct ShareRules
+{
+  const StaticMask& statics;    ///< walls and unknown map areas (within static_tolerance)
+  const BitGrid& monitored;     ///< rectangles of the fleet's obstacles (FleetObstacles): monitoring has them
+  const FleetRobots& robots;    ///< fleet robots' footprints
+};
+
+/**
+ * @brief What this robot's own scans found that the fleet does not hold yet, the triggers' candidates:
+ * - the shareable cells: lethal now, not static, outside every shared obstacle's rectangle, not on a fleet robot,
+ *   within obstacle_range of the last scan's origin;
+ * - the trigger memory: recently marked non-static cells, kept until evidence of free space (the rule that clears
+ *   shared cells) or trigger_memory seconds, for a trigger that comes after the robot backed off.
+ * Owns both, and their kShareable / kRemembered bits in CellFlags.
+ */
+class ObservedCells
+{
+public:
+  const std::vector<std::uint32_t>& shareable() const { return shareable_; }
+  const std::unordered_map<std::uint32_t, RememberedCell>& memory() const { return memory_; }
+  /// @return the remembered cell at index, or nullptr. Most cells asked about are not remembered: the flag spares
+  /// them the hash lookup.
+  const RememberedCell* findRemembered(std::uint32_t index, const CellFlags& flags) const
+  {
+    if (!flags.has(index, CellFlags::kRemembered))
+    {
+      return nullptr;
+    }
+    const auto found = memory_.find(index);
+    return found == memory_.end() ? nullptr : &found->second;
+  }
+  /// @return the shareable cells, sorted
+  std::vector<std::uint32_t> shareableSorted() const;
+  /// @return the remembered cells, sorted
+  std::vector<std::uint32_t> rememberedSorted() const;
+
+  // The scan pass.
+  /**
+   * @brief Forgets remembered cells older than trigger_memory (or from the future: a restart), and lists those
+   * within reach_sq of the scan's origin (when it is finite) in `in_reach`, to be watched for evidence.
+   */
+  void watchRemembered(double now_s, double trigger_memory, const GridGeometry& g, bool origin_finite, double ox,
+                       double oy, double reach_sq, CellFlags& flags, std::vector<std::uint32_t>& in_reach);
+  /// @brief Cells the scan marked become shareable where the rules allow; cells cleared on the grid or beyond
+  /// obstacle_range of the origin stop being shareable.
+  void track(const ScanTouch& touch, const GridGeometry& g, double ox, double oy, double obstacle_range,
+             const CostGrid& grid, const ShareRules& rules, CellFlags& flags);
+  /**
+   * @brief The trigger memory after a scan: `occupied` (signs of occupancy) restarts a cell's evidence of free
+   * space, watched_free adds to it (enough of it forgets the cell), watched_cleared ends its row of marks, and
+   * every marked non-static cell off the fleet robots is remembered, with the sensor position.
+   */
+  void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, float sensor_x, float sensor_y,
+                double now_s, double trigger_memory, unsigned int clearing_scans, double clearing_time,
+                const ShareRules& rules, CellFlags& flags);
+  /// @brief Shareable cells marked steadily (in clearing_scans scans in a row over clearing_time): growth candidates
+  /// of shared obstacles, into `steady`, each flagged kSteady (the caller clears the flags after the scan).
+  void steadyShareable(unsigned int clearing_scans, double clearing_time, CellFlags& flags,
+                       std::vector<std::uint32_t>& steady) const;
+
+  // Changes from the other parts.
+  /// @brief Cells inside a new or grown shared rectangle stop being shareable: monitoring has them.
+  void dropInside(const CellRect& rect, const GridGeometry& g, CellFlags& flags);
+  /// @brief Cells that became static (a new map) leave both lists.
+  void dropStatic(const StaticMask& statics, CellFlags& flags);
+  /// @brief Forgets everything (the obstacle layer's reset).
+  void forget(CellFlags& flags);
+  /// @brief Keeps the shareable cells for which keep(mx, my) holds (ClearCostmapRecovery's window).
+  template <class Keep>
+  void keepShareable(const GridGeometry& g, CellFlags& flags, Keep keep)
+  {
+    std::vector<std::uint32_t> kept;
+    kept.reserve(shareable_.size());
+    for (std::uint32_t index : shareable_)
+    {
+      unsigned int mx = 0, my = 0;
+      g.indexToCells(index, mx, my);
+      if (keep(mx, my))
+      {
+        kept.push_back(index);
+      }
+      else
+      {
+        flags.clear(index, CellFlags::kShareable);
+      }
+    }
+    shareable_.swap(kept);
+  }
+  /**
+   * @brief Onto another grid: each cell goes where mover puts it (the cell holding its centre), into new_flags;
+   * the shareable cells only when keep_observations (a rolling window), the memory always (the newest time wins
+   * where two land on one cell).
+   */
+  template <class Mover>
+  void moveTo(const Mover& mover, bool keep_observations, CellFlags& new_flags);
+
+private:
+  std::vector<std::uint32_t> shareable_;
+  std::unordered_map<std::uint32_t, RememberedCell> memory_;
+};
+
+template <class Mover>
+void ObservedCells::moveTo(const Mover& mover, bool keep_observations, CellFlags& new_flags)
+{
+  std::vector<std::uint32_t> shareable;
+  if (keep_observations)
+  {
+    for (std::uint32_t index : shareable_)
+    {
+      std::uint32_t moved = 0;
+      if (mover(index, moved) && !new_flags.has(moved, CellFlags::kShareable))
+      {
+        new_flags.set(moved, CellFlags::kShareable);
+        shareable.push_back(moved);
+      }
+    }
+    std::sort(shareable.begin(), shareable.end());
+  }
+  std::unordered_map<std::uint32_t, RememberedCell> memory;
+  for (const auto& entry : memory_)
+  {
+    std::uint32_t moved = 0;
+    if (mover(entry.first, moved))
+    {
+      const auto found = memory.find(moved);
+      if (found == memory.end() || found->second.time < entry.second.time)
+      {
+        memory[moved] = entry.second;
+      }
+    }
+  }
+  for (const auto& entry : memory)
+  {
+    new_flags.set(entry.first, CellFlags::kRemembered);
+  }
+  shareable_.swap(shareable);
+  memory_.swap(memory);
+}
+
+}  // namespace sharing_layer
+
+#endif  // SHARING_LAYER_OBSERVED_CELLS_H
