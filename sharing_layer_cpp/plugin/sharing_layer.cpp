@@ -15,6 +15,7 @@
 
 #include "sharing_layer/cost_merge.h"
 #include "sharing_layer/cost_values.h"
+#include "layer_config.h"
 #include "messages.h"
 
 PLUGINLIB_EXPORT_CLASS(sharing_layer::SharingLayer, costmap_2d::Layer)
@@ -38,47 +39,45 @@ Observation toObservation(const costmap_2d::Observation& observation)
 }
 }  // namespace
 
-std::vector<std::string> SharingLayer::adoptParentObservationSources()
-{
-  // name_ is "<costmap>/<layer>" (e.g. global_costmap/sharing_layer): the costmap's namespace is its parent.
-  const std::size_t slash = name_.rfind('/');
-  ros::NodeHandle private_nh("~/" + name_), parent_nh(slash == std::string::npos ? "~" : "~/" + name_.substr(0, slash));
-  std::vector<std::string> copied;
-  std::string sources;
-  if (private_nh.hasParam("observation_sources") || !parent_nh.getParam("observation_sources", sources))
-  {
-    return copied;
-  }
-  private_nh.setParam("observation_sources", sources);
-  copied.push_back("observation_sources");
-  std::istringstream names(sources);
-  for (std::string source; names >> source;)
-  {
-    XmlRpc::XmlRpcValue dict;
-    if (!private_nh.hasParam(source) && parent_nh.getParam(source, dict))
-    {
-      private_nh.setParam(source, dict);
-      copied.push_back(source);
-    }
-  }
-  for (const char* key : { "obstacle_range", "raytrace_range", "max_obstacle_height", "min_obstacle_height" })
-  {
-    XmlRpc::XmlRpcValue value;
-    if (!private_nh.hasParam(key) && parent_nh.getParam(key, value))
-    {
-      private_nh.setParam(key, value);
-      copied.push_back(key);
-    }
-  }
-  return copied;
-}
-
 void SharingLayer::onInitialize()
 {
   // Before ObstacleLayer reads them: a layer with no observation source marks nothing and never shares.
-  const std::vector<std::string> adopted = adoptParentObservationSources();
+  const std::vector<std::string> adopted = adoptParentObservationSources(name_);
   ObstacleLayer::onInitialize();
   ros::NodeHandle private_nh("~/" + name_);
+  LayerConfig config;
+  try
+  {
+    readLayerConfig(private_nh, layered_costmap_->getInscribedRadius(), ros::this_node::getName(),
+                    ros::this_node::getNamespace(), config);
+  }
+  catch (const std::invalid_argument& e)
+  {
+    ROS_FATAL("SharingLayer %s (%s): bad parameter: %s", name_.c_str(), config.params.robot_name.c_str(), e.what());
+    throw;
+  }
+  params_ = config.params;
+  fleet_params_ = config.fleet;
+  inscribed_from_footprint_ = config.inscribed_from_footprint;
+  source_names_ = config.source_names;
+  global_frame_ = layered_costmap_->getGlobalFrameID();
+  warnAboutSetup(adopted, private_nh.getNamespace());
+  wireTopics(config);
+  ROS_INFO("SharingLayer %s (%s): fleet robots from [%s] are never shared (footprint + %.2f m, forgotten after "
+           "%.1f s)",
+           name_.c_str(), params_.robot_name.c_str(), config.fleet_robots_topic.c_str(), fleet_params_.margin,
+           fleet_params_.timeout);
+  ROS_INFO("SharingLayer %s (%s): clearing after %u scans over %.1f s seen free %.2f m before the beam ends; "
+           "trigger memory %.1f s within %.2f m; plan trigger on [%s] within %.2f m of the plan; unknown cells "
+           "from [%s]",
+           name_.c_str(), params_.robot_name.c_str(), params_.clearing_scans, params_.clearing_time,
+           params_.clearing_margin, params_.trigger_memory, params_.trigger_radius, config.plan_topics.c_str(),
+           params_.inscribed_radius, config.map_topic.c_str());
+  rebuildCore();
+}
+
+void SharingLayer::warnAboutSetup(const std::vector<std::string>& adopted, const std::string& private_namespace)
+{
   if (!adopted.empty())
   {
     std::string names;
@@ -88,20 +87,13 @@ void SharingLayer::onInitialize()
     }
     ROS_WARN("SharingLayer %s: no observation_sources in its namespace %s; took them from the costmap's (pre-Hydro "
              "parameter files, which costmap_2d moves only into a costmap_2d::ObstacleLayer): %s",
-             name_.c_str(), private_nh.getNamespace().c_str(), names.c_str());
+             name_.c_str(), private_namespace.c_str(), names.c_str());
   }
-  std::string own_sources;
-  private_nh.param("observation_sources", own_sources, std::string(""));
-  std::istringstream source_names(own_sources);
-  for (std::string name; source_names >> name;)
-  {
-    source_names_.push_back(name);  // ObstacleLayer makes its buffers in this order
-  }
-  if (own_sources.find_first_not_of(" \t") == std::string::npos)
+  if (source_names_.empty())
   {
     ROS_ERROR("SharingLayer %s: no observation source (set %s/observation_sources): this layer marks nothing and "
               "shares nothing",
-              name_.c_str(), private_nh.getNamespace().c_str());
+              name_.c_str(), private_namespace.c_str());
   }
   if (layered_costmap_->isRolling())
   {
@@ -111,72 +103,11 @@ void SharingLayer::onInitialize()
              "cell indexes move with the robot); put it in the global costmap to share",
              name_.c_str());
   }
+}
+
+void SharingLayer::wireTopics(const LayerConfig& config)
+{
   ros::NodeHandle robot_nh;
-  global_frame_ = layered_costmap_->getGlobalFrameID();
-
-  private_nh.param("obstacle_range", params_.limits.obstacle_range, 2.5);
-  private_nh.param("raytrace_range", params_.limits.raytrace_range, 3.0);
-  private_nh.param("min_obstacle_height", params_.limits.min_obstacle_height, 0.0);
-  private_nh.param("max_obstacle_height", params_.limits.max_obstacle_height, 2.0);
-  private_nh.param("static_tolerance", params_.static_tolerance, 3);
-  int occupied = 254;
-  private_nh.param("static_occupied_cost", occupied, 254);
-  params_.static_occupied_cost = static_cast<std::uint8_t>(std::min(255, std::max(1, occupied)));
-  std::string strategy;
-  private_nh.param("proposal_strategy", strategy, std::string("sectors"));
-  private_nh.param("trigger_debounce", params_.trigger_debounce, 2.0);
-  int gap = 1, min_cells = 1, max_cells = 1000000;
-  private_nh.param("cluster_gap", gap, 1);
-  private_nh.param("min_cluster_cells", min_cells, 1);
-  private_nh.param("max_update_cells", max_cells, 1000000);
-  params_.cluster_gap = static_cast<unsigned int>(std::max(0, gap));
-  params_.min_cluster_cells = static_cast<std::size_t>(std::max(0, min_cells));
-  params_.max_update_cells = static_cast<std::size_t>(std::max(0, max_cells));
-  private_nh.param("rectangle_padding", params_.rectangle_padding, 0.0);
-  // Issue 12: evidence-based clearing, trigger memory, plan-blocked trigger.
-  private_nh.param("clearing_margin", params_.clearing_margin, 0.1);
-  int clearing_scans = 3, clearing_neighbours = 8;
-  private_nh.param("clearing_scans", clearing_scans, 3);
-  private_nh.param("clearing_neighbours", clearing_neighbours, 8);
-  // Negative values stay out of range after the cast (validate() names them), instead of wrapping.
-  params_.clearing_scans = clearing_scans < 0 ? 0u : static_cast<unsigned int>(clearing_scans);
-  params_.clearing_neighbours = clearing_neighbours < 0 ? 100000u : static_cast<unsigned int>(clearing_neighbours);
-  private_nh.param("clearing_time", params_.clearing_time, 1.0);
-  private_nh.param("trigger_memory", params_.trigger_memory, 30.0);
-  private_nh.param("trigger_radius", params_.trigger_radius, 4.0);
-  private_nh.param("memory_on_stuck_feedback", params_.memory_on_stuck_feedback, false);
-  private_nh.param("lease_renewal_interval", params_.lease_renewal_interval, 5.0);
-  // The robot's inscribed radius from its footprint (onFootprintChanged) unless set here.
-  inscribed_from_footprint_ = !private_nh.hasParam("inscribed_radius");
-  const double footprint_inscribed = layered_costmap_->getInscribedRadius();
-  private_nh.param("inscribed_radius", params_.inscribed_radius, footprint_inscribed > 0.0 ? footprint_inscribed : 0.25);
-  // The layer runs inside move_base: its global planner publishes under this node's name, whatever it is
-  // (the tutorials' launch names it move_base_node).
-  std::string plan_topics;
-  const std::string node = ros::this_node::getName();
-  private_nh.param("plan_topics", plan_topics, node + "/NavfnROS/plan " + node + "/GlobalPlanner/plan");
-  std::string map_topic;
-  private_nh.param("map_topic", map_topic, std::string("map"));
-  std::string robot_name = ros::this_node::getNamespace();
-  robot_name.erase(std::remove(robot_name.begin(), robot_name.end(), '/'), robot_name.end());
-  private_nh.param("robot_name", params_.robot_name, robot_name.empty() ? std::string("robot") : robot_name);
-  // Fleet robots are never shared (issue 12, part 5).
-  private_nh.param("robot_exclusion_margin", fleet_params_.margin, 0.2);
-  private_nh.param("robot_timeout", fleet_params_.timeout, 3.0);
-  std::string fleet_robots_topic;
-  private_nh.param("fleet_robots_topic", fleet_robots_topic, std::string("fleet_robots"));
-  try
-  {
-    params_.strategy = parseProposalStrategy(strategy);
-    params_.validate();
-    fleet_params_.validate();
-  }
-  catch (const std::invalid_argument& e)
-  {
-    ROS_FATAL("SharingLayer %s (%s): bad parameter: %s", name_.c_str(), params_.robot_name.c_str(), e.what());
-    throw;
-  }
-
   proposals_pub_ = robot_nh.advertise<sharing_msgs::SharedObstacle>("obstacle_proposals", 10);
   updates_pub_ = robot_nh.advertise<sharing_msgs::SharedObstacle>("obstacle_updates", 100);
   stuck_sub_ = robot_nh.subscribe("stuck_feedback", 10, &SharingLayer::stuckCallback, this);
@@ -184,7 +115,7 @@ void SharingLayer::onInitialize()
   shared_sub_ = robot_nh.subscribe("shared_obstacles", 100, &SharingLayer::sharedCallback, this);
   expired_sub_ = robot_nh.subscribe("expired_obstacles", 100, &SharingLayer::expiredCallback, this);
   // Whichever of the planners publishes; an empty list (or "none") switches the plan trigger off.
-  std::istringstream topics(plan_topics);
+  std::istringstream topics(config.plan_topics);
   for (std::string topic; topics >> topic;)
   {
     if (topic != "none")
@@ -199,25 +130,14 @@ void SharingLayer::onInitialize()
     goal_status_sub_ = robot_nh.subscribe("move_base/status", 1, &SharingLayer::goalStatusCallback, this);
     plan_publisher_check_ = robot_nh.createTimer(ros::Duration(15.0), &SharingLayer::checkPlanPublishers, this, true);
   }
-  if (!map_topic.empty() && map_topic != "none")
+  if (!config.map_topic.empty() && config.map_topic != "none")
   {
-    map_sub_ = robot_nh.subscribe(map_topic, 1, &SharingLayer::mapCallback, this);
+    map_sub_ = robot_nh.subscribe(config.map_topic, 1, &SharingLayer::mapCallback, this);
   }
-  if (!fleet_robots_topic.empty() && fleet_robots_topic != "none")
+  if (!config.fleet_robots_topic.empty() && config.fleet_robots_topic != "none")
   {
-    fleet_robots_sub_ = robot_nh.subscribe(fleet_robots_topic, 2, &SharingLayer::fleetRobotsCallback, this);
+    fleet_robots_sub_ = robot_nh.subscribe(config.fleet_robots_topic, 2, &SharingLayer::fleetRobotsCallback, this);
   }
-  ROS_INFO("SharingLayer %s (%s): fleet robots from [%s] are never shared (footprint + %.2f m, forgotten after "
-           "%.1f s)",
-           name_.c_str(), params_.robot_name.c_str(), fleet_robots_topic.c_str(), fleet_params_.margin,
-           fleet_params_.timeout);
-  ROS_INFO("SharingLayer %s (%s): clearing after %u scans over %.1f s seen free %.2f m before the beam ends; "
-           "trigger memory %.1f s within %.2f m; plan trigger on [%s] within %.2f m of the plan; unknown cells "
-           "from [%s]",
-           name_.c_str(), params_.robot_name.c_str(), params_.clearing_scans, params_.clearing_time,
-           params_.clearing_margin, params_.trigger_memory, params_.trigger_radius, plan_topics.c_str(),
-           params_.inscribed_radius, map_topic.c_str());
-  rebuildCore();
 }
 
 GridGeometry SharingLayer::masterGeometry() const
@@ -648,53 +568,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
   const double now = ros::Time::now().toSec();
   for (const SourceObservation& source_observation : observations)
   {
-    const costmap_2d::Observation& observation = source_observation.observation;
-    const ScanLimits& limits = source_observation.limits;
-    Observation scan = toObservation(observation);
-    ScanOutcome outcome;
-    try
-    {
-      outcome = core_->processScan(scan, now, limits);
-    }
-    catch (const std::invalid_argument& e)  // a source's ranges (ObstacleLayer takes any value)
-    {
-      ROS_ERROR_THROTTLE(10.0, "SharingLayer (%s): observation source %s skipped: %s (its obstacle_range %g, "
-                               "raytrace_range %g)",
-                         params_.robot_name.c_str(), source_observation.source.c_str(), e.what(),
-                         limits.obstacle_range, limits.raytrace_range);
-      continue;
-    }
-    if (static_pending_)
-    {
-      if (pre_static_scans_.size() == kMaxPreStaticScans)
-      {
-        pre_static_scans_.pop_front();
-      }
-      pre_static_scans_.emplace_back(std::move(scan), limits);
-    }
-    if (!outcome.touch.origin_in_map)
-    {
-      ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): sensor origin (%.2f, %.2f) is off the map; not clearing",
-                        params_.robot_name.c_str(), observation.origin_.x, observation.origin_.y);
-    }
-    if (!rolling_window_)  // its cell indexes would be those of a grid that moves with the robot
-    {
-      for (const ObstacleUpdate& update : outcome.updates)
-      {
-        updates_pub_.publish(toMessage(update, global_frame_));
-      }
-    }
-    if (!static_pending_ && !rolling_window_)  // without the a-priori map every wall looks new
-    {
-      handleTrigger(core_->checkPlan(robot_x, robot_y, now), now);
-    }
-    // What the scan touched, as ObstacleLayer grows its bounds (the origin, the beams up to raytrace_range,
-    // the marked points), not a box of the range around the sensor: every later layer works over this.
-    if (!outcome.touch.touchedNothing())
-    {
-      touch(outcome.touch.min_x, outcome.touch.min_y, min_x, min_y, max_x, max_y);
-      touch(outcome.touch.max_x, outcome.touch.max_y, min_x, min_y, max_x, max_y);
-    }
+    processObservation(source_observation, now, robot_x, robot_y, min_x, min_y, max_x, max_y);
   }
   if (stuck_pending_)
   {
@@ -717,6 +591,58 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     touch(dirty.max_x, dirty.max_y, min_x, min_y, max_x, max_y);
   }
   updateFootprint(robot_x, robot_y, robot_yaw, min_x, min_y, max_x, max_y);
+}
+
+void SharingLayer::processObservation(const SourceObservation& source_observation, double now, double robot_x,
+                                      double robot_y, double* min_x, double* min_y, double* max_x, double* max_y)
+{
+  const costmap_2d::Observation& observation = source_observation.observation;
+  const ScanLimits& limits = source_observation.limits;
+  Observation scan = toObservation(observation);
+  ScanOutcome outcome;
+  try
+  {
+    outcome = core_->processScan(scan, now, limits);
+  }
+  catch (const std::invalid_argument& e)  // a source's ranges (ObstacleLayer takes any value)
+  {
+    ROS_ERROR_THROTTLE(10.0, "SharingLayer (%s): observation source %s skipped: %s (its obstacle_range %g, "
+                             "raytrace_range %g)",
+                       params_.robot_name.c_str(), source_observation.source.c_str(), e.what(),
+                       limits.obstacle_range, limits.raytrace_range);
+    return;
+  }
+  if (static_pending_)
+  {
+    if (pre_static_scans_.size() == kMaxPreStaticScans)
+    {
+      pre_static_scans_.pop_front();
+    }
+    pre_static_scans_.emplace_back(std::move(scan), limits);
+  }
+  if (!outcome.touch.origin_in_map)
+  {
+    ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): sensor origin (%.2f, %.2f) is off the map; not clearing",
+                      params_.robot_name.c_str(), observation.origin_.x, observation.origin_.y);
+  }
+  if (!rolling_window_)  // its cell indexes would be those of a grid that moves with the robot
+  {
+    for (const ObstacleUpdate& update : outcome.updates)
+    {
+      updates_pub_.publish(toMessage(update, global_frame_));
+    }
+  }
+  if (!static_pending_ && !rolling_window_)  // without the a-priori map every wall looks new
+  {
+    handleTrigger(core_->checkPlan(robot_x, robot_y, now), now);
+  }
+  // What the scan touched, as ObstacleLayer grows its bounds (the origin, the beams up to raytrace_range, the marked
+  // points), not a box of the range around the sensor: every later layer works over this.
+  if (!outcome.touch.touchedNothing())
+  {
+    touch(outcome.touch.min_x, outcome.touch.min_y, min_x, min_y, max_x, max_y);
+    touch(outcome.touch.max_x, outcome.touch.max_y, min_x, min_y, max_x, max_y);
+  }
 }
 
 bool SharingLayer::sourceObservations(std::vector<SourceObservation>& out)

@@ -19,6 +19,7 @@
 #include <topic_tools/shape_shifter.h>
 
 #include "sharing_layer/sharing_core.h"
+#include "layer_config.h"
 
 namespace sharing_layer
 {
@@ -68,10 +69,11 @@ private:
   /// @brief move_base's action status: the plan trigger follows the global plan only while a goal is active
   /// (navfn also publishes the plans of make_plan service calls on the same topic).
   void goalStatusCallback(const actionlib_msgs::GoalStatusArray::ConstPtr& msg);
-  /// @brief With the tutorials' pre-Hydro files the observation sources sit in the costmap's namespace, and
-  /// costmap_2d copies them only into a plugin of type costmap_2d::ObstacleLayer: copy them here (with a
-  /// WARN naming them) so that the layer is not blind. @return the names copied
-  std::vector<std::string> adoptParentObservationSources();
+  /// @brief The WARNs and ERRORs of a set-up that shares nothing or less than expected: observation sources taken
+  /// from the costmap's namespace (`adopted`), none at all, a rolling window.
+  void warnAboutSetup(const std::vector<std::string>& adopted, const std::string& private_namespace);
+  /// @brief Advertises and subscribes the layer's topics (onInitialize, after the parameters were read).
+  void wireTopics(const LayerConfig& config);
   /// @brief WARN once when no plan topic has a publisher: the plan trigger would be silently off.
   void checkPlanPublishers(const ros::TimerEvent&);
   /// @brief Hands the last fleet_robots message to the core, in the global frame; core_mutex_ held.
@@ -115,6 +117,10 @@ private:
     std::string source;  ///< its name in observation_sources, for logs
   };
   bool sourceObservations(std::vector<SourceObservation>& out);
+  /// @brief One observation through the core: its monitoring updates published, the plan trigger checked, the
+  /// bounds grown by what it touched; core_mutex_ held.
+  void processObservation(const SourceObservation& source_observation, double now, double robot_x, double robot_y,
+                          double* min_x, double* min_y, double* max_x, double* max_y);
   std::vector<std::string> source_names_;  ///< observation_sources, in the order of observation_buffers_
   static constexpr std::size_t kMaxPreStaticScans = 100;
   ros::Time stuck_stamp_;
