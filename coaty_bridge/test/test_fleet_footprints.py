@@ -175,6 +175,9 @@ def test_footprint_advert_reaches_the_peer_not_itself(make_fleet_client, observe
     mine = make(robot="robot_0")
     wait_for(lambda: a.publish_footprint(mine) and b.footprints, what="robot_1 hears robot_0")
     assert b.footprints[0] == (mine, a.identity_id)
+    # The observer's copy and robot_0's own echo may come after robot_1's copy on a loaded machine.
+    wait_for(lambda: observer.on("ADV::" + OT), what="the observer's copy of the advert")
+    wait_for(lambda: a.counters()["echoes_suppressed"] >= 1, what="robot_0's own echo, suppressed")
     (topic, data) = observer.on("ADV::" + OT)[0]
     assert topic == "coaty/3/fleet/ADV::%s.area_0_0/%s" % (OT, a.identity_id)
     assert data["object"]["objectType"] == OT + ".area_0_0"
