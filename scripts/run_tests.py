@@ -6,6 +6,11 @@ Each phase writes JUnit XML under test_results/, and the run ends with one line
 "N passed, N failed, N skipped". The exit code is non-zero when a test failed,
 when a phase could not run, or when no test ran at all.
 
+Rostests: every `.test` file anywhere in a package folder (not only under test/). A `.test`
+whose launch needs something that is not here (a ROS package that is not installed, or a test
+program its package builds only when an optional dependency is found, as sharing_layer_cpp's
+plugin_layer_tests needs costmap_2d) is reported as skipped with the reason, not failed.
+
 Usage: run_tests.py [--phase deps|gtest|pytest|rostest ...] [-k PYTEST_EXPR]
 """
 import argparse
@@ -31,6 +36,7 @@ class Tally:
     def __init__(self):
         self.passed = self.failed = self.skipped = 0
         self.failures = []
+        self.skips = []
 
     def add_junit(self, path, label):
         """Adds the counts of one JUnit XML file; a file that can't be read is a failure."""
@@ -55,6 +61,10 @@ class Tally:
     def fail(self, reason):
         self.failed += 1
         self.failures.append(reason)
+
+    def skip(self, label, reason):
+        self.skipped += 1
+        self.skips.append("%s: %s" % (label, reason))
 
 
 def run_dependency_check(tally):
@@ -113,11 +123,95 @@ def run_pytest(tally, expr):
             tally.fail("pytest %s exited %d (usage, collection or internal error)" % (pkg, proc.returncode))
 
 
-def run_rostests(tally):
+# Folders of a package that hold no sources of its tests (build output, caches, npm downloads).
+_NOT_SOURCES = {"build", "devel", "install", "node_modules", "__pycache__"}
+
+
+def discover_rostests(root=ROOT, packages=PACKAGES):
+    """Every .test file in a package folder, at any depth (a package's plugin/test/ too), sorted."""
     files = []
-    for pkg in PACKAGES:
-        files += glob.glob(os.path.join(ROOT, pkg, "test", "**", "*.test"), recursive=True)
-    files.sort()
+    for pkg in packages:
+        for folder, subfolders, names in os.walk(os.path.join(root, pkg)):
+            subfolders[:] = sorted(d for d in subfolders if not d.startswith(".") and d not in _NOT_SOURCES)
+            files += [os.path.join(folder, name) for name in names if name.endswith(".test")]
+    return sorted(files)
+
+
+def missing_requirements(path):
+    """Why the rostest ``path`` cannot run here (a sentence), or None when it can.
+
+    Reads the launch file as roslaunch does (includes, args, $(find ...)) and checks that every
+    package it names is installed and that every <test> program exists. A test program that is
+    missing although its package is there is a skip only when the package declares a dependency
+    that is not installed (it builds that program only with it); otherwise the test runs and
+    rostest reports the missing program as a failure ('make build' did not build it)."""
+    try:
+        import rospkg
+        import roslaunch.config
+        import roslib.packages
+    except ImportError as err:
+        return "roslaunch is not importable (%s); source scripts/env.sh" % err
+    rospack = rospkg.RosPack()
+    try:
+        config = roslaunch.config.load_config_default([path], None, verbose=False)
+    except rospkg.ResourceNotFound as err:
+        return "needs ROS package %s, which is not installed" % err.args[0]
+    except Exception:  # noqa: BLE001 - another launch error: rostest runs it and reports it as a failure
+        return None
+    for node in list(config.tests) + list(config.nodes):
+        try:
+            rospack.get_path(node.package)
+        except rospkg.ResourceNotFound:
+            return "needs ROS package %s (for %s), which is not installed" % (node.package, node.type)
+    for test in config.tests:
+        try:
+            found = roslib.packages.find_node(test.package, test.type, rospack=rospack)
+        except rospkg.ResourceNotFound:
+            found = []
+        if found:
+            continue
+        absent = _uninstalled_dependencies(test.package, rospack)
+        if absent:
+            return "test program %s/%s is not built here: %s depends on %s, which %s not installed " \
+                   "(it builds its optional parts only where found)" % (
+                       test.package, test.type, test.package, ", ".join(absent),
+                       "are" if len(absent) > 1 else "is")
+    return None
+
+
+def _uninstalled_dependencies(package, rospack):
+    """Dependencies that ``package``'s package.xml declares, are ROS packages and are not
+    installed. Keys that are not ROS package names (python3-numpy, pybind11-dev) and gtest are left
+    out: make setup installs those, and rospack cannot find them anyway."""
+    import rospkg
+    try:
+        root = ET.parse(os.path.join(rospack.get_path(package), "package.xml")).getroot()
+    except (rospkg.ResourceNotFound, ET.ParseError, OSError):
+        return []
+    absent = []
+    for element in root:
+        name = (element.text or "").strip()
+        if not element.tag.endswith("depend") or element.tag in ("buildtool_depend", "doc_depend"):
+            continue
+        if not name or name in absent or "-" in name or name in ("gtest", "catkin"):
+            continue
+        try:
+            rospack.get_path(name)
+        except rospkg.ResourceNotFound:
+            absent.append(name)
+    return absent
+
+
+def write_skipped_junit(xml, name, reason):
+    os.makedirs(os.path.dirname(xml), exist_ok=True)
+    suite = ET.Element("testsuite", name=name, tests="1", failures="0", errors="0", skipped="1")
+    case = ET.SubElement(suite, "testcase", classname="rostest", name=name)
+    ET.SubElement(case, "skipped", message=reason)
+    ET.ElementTree(suite).write(xml, encoding="utf-8", xml_declaration=True)
+
+
+def run_rostests(tally):
+    files = discover_rostests()
     if not files:
         print("[rostest] no .test files", flush=True)
         return
@@ -126,6 +220,12 @@ def run_rostests(tally):
         name = os.path.splitext(rel)[0].replace(os.sep, "_")
         out_dir = os.path.join(RESULTS, "rostest", name)
         shutil.rmtree(out_dir, ignore_errors=True)  # a stale result must not count as this run's
+        reason = missing_requirements(path)
+        if reason:
+            print("[rostest %d/%d] %s SKIPPED: %s" % (i, len(files), rel, reason), flush=True)
+            write_skipped_junit(os.path.join(out_dir, "skipped.xml"), name, reason)
+            tally.skip("rostest " + rel, reason)
+            continue
         print("[rostest %d/%d] %s" % (i, len(files), rel), flush=True)
         start = time.time()
         proc = subprocess.run(["rostest", "--results-base-dir", out_dir, path], cwd=ROOT)
@@ -165,6 +265,8 @@ def main():
     if "rostest" in phases:
         run_rostests(tally)
 
+    for skip in tally.skips:
+        print("SKIPPED " + skip)
     for failure in tally.failures:
         print("FAILED  " + failure)
     if tally.passed + tally.failed == 0:

@@ -1,0 +1,121 @@
+"""The test runner (scripts/run_tests.py) runs every rostest of every package: its glob once only
+looked under <package>/test/, so sharing_layer_cpp/plugin/test/plugin_layer.test never ran, even
+where costmap_2d is installed. A .test whose needs are not installed here is skipped with the
+reason, not failed (issue 28)."""
+import importlib.util
+import os
+import xml.etree.ElementTree as ET
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# Not packages: the workspace (src/ links the packages again, build/ and devel/ are generated) and
+# the runner's own output.
+NOT_PACKAGES = {"catkin_ws", "test_results", "out"}
+
+
+def load_runner():
+    spec = importlib.util.spec_from_file_location("run_tests", os.path.join(ROOT, "scripts", "run_tests.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+runner = load_runner()
+
+
+def every_test_file_in_the_repository():
+    """A walk of its own (not the runner's): every .test under a top-level folder other than the
+    workspace, hidden folders and npm downloads left out."""
+    found = set()
+    for top in sorted(os.listdir(ROOT)):
+        if top.startswith(".") or top in NOT_PACKAGES or not os.path.isdir(os.path.join(ROOT, top)):
+            continue
+        for folder, subfolders, names in os.walk(os.path.join(ROOT, top)):
+            subfolders[:] = [d for d in subfolders if not d.startswith(".") and d != "node_modules"]
+            found.update(os.path.join(folder, n) for n in names if n.endswith(".test"))
+    return found
+
+
+def test_every_package_folder_is_in_the_runners_list():
+    packages = {d for d in os.listdir(ROOT) if d not in NOT_PACKAGES
+                and os.path.isfile(os.path.join(ROOT, d, "package.xml"))}
+    assert packages == set(runner.PACKAGES), "scripts/run_tests.py PACKAGES misses %s or lists %s" % (
+        sorted(packages - set(runner.PACKAGES)), sorted(set(runner.PACKAGES) - packages))
+
+
+def test_every_test_file_of_every_package_is_run():
+    expected = every_test_file_in_the_repository()
+    discovered = set(runner.discover_rostests())
+    assert expected, "no .test file found at all"
+    assert expected <= discovered, "the runner does not pick up %s" % sorted(
+        os.path.relpath(p, ROOT) for p in expected - discovered)
+    # the file that the old <package>/test/**/*.test glob missed
+    assert os.path.join(ROOT, "sharing_layer_cpp", "plugin", "test", "plugin_layer.test") in discovered
+
+
+def test_discovery_finds_nested_test_files_and_leaves_out_build_and_hidden_folders(tmp_path):
+    for rel in ("pkg_a/test/a.test", "pkg_a/plugin/test/deep/b.test", "pkg_a/c.test",
+                "pkg_a/build/x.test", "pkg_a/.hidden/y.test", "pkg_a/node_modules/z.test", "pkg_b/d.test",
+                "pkg_a/test/not_a_test.launch"):
+        path = tmp_path / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("<launch/>")
+    found = [os.path.relpath(p, str(tmp_path)) for p in runner.discover_rostests(str(tmp_path), ["pkg_a"])]
+    assert found == ["pkg_a/c.test", "pkg_a/plugin/test/deep/b.test", "pkg_a/test/a.test"]
+
+
+def ros_or_skip():
+    try:
+        import roslaunch  # noqa: F401
+        import rospkg
+        rospkg.RosPack().get_path("rostest")
+    except (ImportError, Exception) as err:  # noqa: BLE001
+        pytest.skip("ROS (roslaunch, rostest) not available here: %s" % err)
+
+
+def write(tmp_path, name, body):
+    path = tmp_path / name
+    path.write_text("<launch>\n%s\n</launch>\n" % body)
+    return str(path)
+
+
+def test_a_test_needing_an_uninstalled_package_is_skipped_with_the_reason(tmp_path):
+    ros_or_skip()
+    include = write(tmp_path, "include.test", '<include file="$(find no_such_package_q28)/launch/x.launch"/>\n'
+                    '<test test-name="t" pkg="rostest" type="hztest"/>')
+    node = write(tmp_path, "node.test", '<node pkg="no_such_package_r28" type="prog" name="n"/>\n'
+                 '<test test-name="t" pkg="rostest" type="hztest"/>')
+    assert "no_such_package_q28" in runner.missing_requirements(include)
+    assert "no_such_package_r28" in runner.missing_requirements(node)
+
+
+def test_a_missing_program_of_a_complete_package_is_not_a_skip(tmp_path):
+    """rostest's own dependencies are installed: a missing program there is a build failure, and the
+    runner lets rostest report it as one."""
+    ros_or_skip()
+    path = write(tmp_path, "missing.test", '<test test-name="t" pkg="rostest" type="no_such_program_q28"/>')
+    assert runner.missing_requirements(path) is None
+
+
+def test_the_plugin_test_is_skipped_naming_costmap_2d_where_it_is_missing():
+    ros_or_skip()
+    import rospkg
+    path = os.path.join(ROOT, "sharing_layer_cpp", "plugin", "test", "plugin_layer.test")
+    try:
+        rospkg.RosPack().get_path("costmap_2d")
+    except rospkg.ResourceNotFound:
+        reason = runner.missing_requirements(path)
+        assert reason is not None and "costmap_2d" in reason and "plugin_layer_tests" in reason
+    else:
+        pytest.skip("costmap_2d is installed here: the plugin test runs")
+
+
+def test_a_skip_is_counted_and_kept_as_junit(tmp_path):
+    xml = str(tmp_path / "rostest" / "x" / "skipped.xml")
+    runner.write_skipped_junit(xml, "x", "needs ROS package costmap_2d, which is not installed")
+    tally = runner.Tally()
+    tally.add_junit(xml, "rostest x")
+    assert (tally.passed, tally.failed, tally.skipped) == (0, 0, 1)
+    case = ET.parse(xml).getroot().find("testcase")
+    assert "costmap_2d" in case.find("skipped").get("message")
