@@ -173,3 +173,62 @@ def test_bad_sensor_values(tmp_path, sensor, reason):
     w = load_world(str(p), log=quiet)
     assert len(w.robots) == 1 and w.robots[0].rangers == ()
     assert len(w.problems) == 1 and reason in w.problems[0] and "s.world:" in w.problems[0]
+
+
+# --- Stage 4.3 syntax (issue 28): Stage 4.3 silently ignores the Stage-3 spellings; we say so ---------
+
+def load_with_lines(path, **kwargs):
+    lines = []
+    world = load_world(str(path), log=lambda lvl, msg: lines.append((lvl, msg)), **kwargs)
+    return world, [msg for lvl, msg in lines if lvl == "warn"]
+
+
+def test_stage3_range_max_is_read_with_a_warning_naming_robot_value_and_the_fix():
+    w, warns = load_with_lines(h.WILLOW)
+    assert w.robots[0].rangers[0].range_max == pytest.approx(30.0)
+    (first,) = [m for m in warns if "pr2_0" in m]
+    for shown in ("willow-pr2-multi.world:10", "robot pr2_0 (robot_0)", "range_max 30", "Stage 4.3 ignores it",
+                  "[0 5]", "range [ 0 30 ]"):
+        assert shown in first, (shown, first)
+    assert len([m for m in warns if "range_max" in m]) == 2        # once per robot
+
+
+@pytest.mark.parametrize("compat", [False, True])
+def test_range_wins_over_range_max_as_in_stage(tmp_path, compat):
+    p = tmp_path / "both.world"
+    p.write_text('position( name "r"\n  ranger( sensor( range [ 0.1 12 ]\n range_max 30 fov 90 samples 10 ) )\n)\n')
+    w, warns = load_with_lines(p, stage43_range_compat=compat)
+    (laser,) = w.robots[0].rangers
+    assert (laser.range_min, laser.range_max) == pytest.approx((0.1, 12.0))
+    assert any("both.world:3" in m and "range_max 30" in m and "ignored" in m for m in warns), warns
+
+
+def test_stage43_sensor_defaults_apply_to_each_sensor(tmp_path):
+    """Stage 4.3's Sensor(): range [0 5], fov 0.1 rad, 1 sample, whatever the ranger around it says."""
+    p = tmp_path / "defaults.world"
+    p.write_text('position( name "r"\n  ranger( sensor( ) )\n)\n')
+    w, warns = load_with_lines(p, stage43_range_compat=True)
+    (laser,) = w.robots[0].rangers
+    assert (laser.range_min, laser.range_max, laser.samples) == (0.0, 5.0, 1)
+    assert laser.fov == pytest.approx(0.1)
+    assert warns == []
+
+
+def test_ranger_properties_outside_a_sensor(tmp_path):
+    p = tmp_path / "bare.world"
+    p.write_text('position( name "r"\n  ranger( range [ 0 20 ] fov 180 samples 181 )\n)\n')
+    w, warns = load_with_lines(p)
+    assert w.robots[0].rangers[0].range_max == pytest.approx(20.0)
+    assert any("bare.world:2" in m and "robot r" in m and "only inside sensor" in m for m in warns), warns
+    w, warns = load_with_lines(p, stage43_range_compat=True)       # Stage 4.3: a ranger without a sensor
+    assert w.robots[0].rangers == ()
+    assert any("no sensor and no scan" in m for m in warns), warns
+
+
+def test_stage3_laser_model_is_refused_in_stage43_mode():
+    path = os.path.join(h.DATA, "macros.world")
+    w, warns = load_with_lines(path)
+    assert w.robots[0].rangers[0].range_max == pytest.approx(20.0)
+    assert any("'laser' model" in m and "robot a" in m for m in warns)
+    w, _ = load_with_lines(path, stage43_range_compat=True)
+    assert w.robots[0].rangers == () and any("Unknown model type laser" in p for p in w.problems)

@@ -17,12 +17,13 @@ What is read (everything else is ignored with a debug line):
   ``fov``, ``samples`` on the model) or a ranger carrying those properties itself.
   Like stage_ros, only the first sensor of a ranger becomes a scan.
 
-Range decision (DESIGN.md §7): the Willow world writes its 30 m laser with Stage 3's
-``range_max 30.0``. Stage 4.3 only reads ``range [min max]`` and silently falls back
-to its default 0–5 m. We honour ``range_max``/``range_min`` as the world's author
-intended (the 30 m scanner of the original tests). ``stage43_range_compat=True``
-reproduces Stage 4.3 instead: the Stage-3 spellings are ignored (with a warning) and
-the default [0, 5] applies, as in the recorded stageros bags.
+Range decision (DESIGN.md §7, issue 28): Stage 4.3 reads only ``sensor( range [min max] ...)``
+and silently ignores the Stage-3 spellings (``range_min``/``range_max``, ``view``, properties on
+the ranger itself; the ``laser`` model it refuses), falling back to its default 0-5 m. We WARN on
+each, naming file:line, robot and value, and read it as written (the Willow world's
+``range_max 30.0`` is the 30 m scanner of the original tests); where ``range`` is given it wins, as
+in Stage. ``stage43_range_compat=True`` reads exactly as Stage 4.3: the Stage-3 spellings are
+ignored (with the warning) and the default [0, 5] applies, as in the recorded stageros bags.
 
 Errors: a file that cannot be parsed raises ``WorldSyntaxError`` (file, line,
 reason). A model with a bad value (missing bitmap, bad pose, negative size, zero
@@ -197,7 +198,7 @@ class _Ctx:
         for child in ent.children:
             if child.type in ("ranger", "laser"):
                 try:
-                    spec = self.load_ranger(child, "robot_%d/%s" % (index, child.kind))
+                    spec = self.load_ranger(child, "robot_%d/%s" % (index, child.kind), name)
                 except _Drop as drop:
                     msg = "%s:%d: %s; ranger '%s' of robot %s dropped (robot kept)" % (
                         drop.path, drop.line, drop.reason, child.kind, name)
@@ -214,12 +215,24 @@ class _Ctx:
             color=_color(ent, (255, 0, 0), self.log), drive=drive, rangers=tuple(rangers),
             where=ent.where(), height=_height(ent)))
 
-    def load_ranger(self, ent, label):
+    def load_ranger(self, ent, label, robot="?"):
+        """One ranger of a robot. Stage 4.3 reads a ranger only from its sensor( range [min max] fov
+        samples ): the Stage-3 spellings (a 'laser' model, range_min / range_max / view, properties
+        on the ranger itself) are what it silently ignores, so each gets a WARN naming the robot, the
+        value and what Stage 4.3 does instead. They are read as written (the world author's intent,
+        e.g. the tutorials' Willow 30 m), or, with ``stage43_range_compat``, ignored as Stage 4.3 does."""
         self.debug_unused(ent, _USED[ent.type])
         pose = _pose(ent)
         z = _pose_z(ent)
         sensors = [c for c in ent.children if c.type == "sensor"]
+        who = "robot %s (%s), %s '%s'" % (robot, label.split("/")[0], ent.type, ent.kind)
         if ent.type == "laser":
+            if self.compat:
+                raise _Drop(ent, "%s: Stage 4.3 has no 'laser' model (it stops: \"Unknown model type laser\"); "
+                                 "write ranger( sensor( range [min max] fov samples ) )" % who)
+            self.log("warn", "%s: %s: Stage-3 'laser' model read as written; Stage 4.3 has no 'laser' model "
+                     "and refuses this world; write ranger( sensor( range [min max] fov samples ) )"
+                     % (ent.where(), who))
             src = ent
             defaults = STAGE3_LASER_DEFAULTS
         elif sensors:
@@ -232,7 +245,15 @@ class _Ctx:
             z += _pose_z(src)
             defaults = dict(range_min=STAGE_DEFAULT_RANGE[0], range_max=STAGE_DEFAULT_RANGE[1],
                             fov=STAGE_DEFAULT_FOV_DEG, samples=1)
-        elif any(k in ent.props for k in ("range", "range_max", "samples", "fov")):
+        elif any(k in ent.props for k in ("range", "range_min", "range_max", "view", "samples", "fov")):
+            if self.compat:
+                self.log("warn", "%s: %s: range, fov and samples on the ranger itself ignored "
+                         "(stage43_range_compat): Stage 4.3 reads them only inside sensor( ... ), so this "
+                         "ranger has no sensor and no scan" % (ent.where(), who))
+                return None
+            self.log("warn", "%s: %s: range, fov and samples on the ranger itself read as written; Stage 4.3 "
+                     "reads them only inside sensor( ... ) and would give this ranger no scan"
+                     % (ent.where(), who))
             src = ent
             defaults = dict(range_min=STAGE_DEFAULT_RANGE[0], range_max=STAGE_DEFAULT_RANGE[1],
                             fov=STAGE_DEFAULT_FOV_DEG, samples=1)
@@ -244,18 +265,31 @@ class _Ctx:
         if "range" in src.props:
             r = _tuple(src, "range", None, (2,))
             rmin, rmax = r
-        if "view" in src.props:                 # Stage-3 sonar: view [min max fov]
-            v = _tuple(src, "view", None, (3,))
-            rmin, rmax, fov_deg = v
-        stage3 = [k for k in ("range_min", "range_max") if k in src.props]
-        if stage3 and self.compat and ent.type != "laser":
-            self.log("warn", "%s: Stage-3 '%s' ignored (stage43_range_compat): range is [%g %g] "
-                     "as in Stage 4.3" % (src.props[stage3[0]].where(), stage3[0], rmin, rmax))
-        else:
+        stage3 = [k for k in ("range_min", "range_max", "view") if k in src.props]
+        if stage3 and ent.type != "laser":
+            written = " ".join("%s %s" % (k, _shown(src.props[k].value)) for k in stage3)
+            where = src.props[stage3[0]].where()
+            if "range" in src.props:
+                # Stage 4.3 reads range and ignores the rest; so do we, in both modes
+                self.log("warn", "%s: %s: Stage-3 '%s' ignored: range [%g %g] is given, and Stage 4.3 reads "
+                         "only that; remove it" % (where, who, written, rmin, rmax))
+                stage3 = []
+            elif self.compat:
+                self.log("warn", "%s: %s: Stage-3 '%s' ignored (stage43_range_compat): range is [%g %g] as in "
+                         "Stage 4.3, which reads only range [min max]" % (where, who, written, rmin, rmax))
+                stage3 = []
+        if stage3:
+            if "view" in src.props:             # Stage-3 sonar: view [min max fov]
+                rmin, rmax, fov_deg = _tuple(src, "view", None, (3,))
             if "range_min" in src.props:
                 rmin = _number_prop(src, "range_min", rmin)
             if "range_max" in src.props:
                 rmax = _number_prop(src, "range_max", rmax)
+            if ent.type != "laser":
+                self.log("warn", "%s: %s: Stage-3 '%s' read as written, range [%g %g]; Stage 4.3 ignores it "
+                         "and uses [%g %g]; write range [ %g %g ]" % (
+                             src.props[stage3[0]].where(), who, written, rmin, rmax,
+                             STAGE_DEFAULT_RANGE[0], STAGE_DEFAULT_RANGE[1], rmin, rmax))
         fov_deg = _number_prop(src, "fov", fov_deg)
         if "samples" in src.props:
             prop = src.props["samples"]
@@ -269,6 +303,13 @@ class _Ctx:
             raise _Drop(where, "range must satisfy 0 <= min < max, got [%g %g]" % (rmin, rmax))
         return RangerSpec(name=label, pose=pose, range_min=float(rmin), range_max=float(rmax),
                           fov=math.radians(fov_deg), samples=int(samples), where=ent.where(), z=z)
+
+
+def _shown(value):
+    """A property value as written in a world file: 30, [0 30 90], "x"."""
+    if isinstance(value, tuple):
+        return "[%s]" % " ".join(_shown(v) for v in value)
+    return "%g" % value if isinstance(value, float) else repr(value)
 
 
 def _label(ent):
