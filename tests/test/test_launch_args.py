@@ -24,8 +24,8 @@ def nodes(*args):
     ("obstacle_duration:=0", "obstacle_duration_must_be_at_least_1_second"),
     ("localisation_error:=-0.1", "localisation_error_must_be_non_negative"),
     ("localisation_error_yaw:=-1", "localisation_error_must_be_non_negative"),
-    ("layout:=nowhere", "layout_must_be_facility_or_deadend"),
-    ("layout:=Facility", "layout_must_be_facility_or_deadend"),
+    ("layout:=nowhere", "layout_must_be_facility_deadend_or_corridors"),
+    ("layout:=Facility", "layout_must_be_facility_deadend_or_corridors"),
 ])
 def test_bad_argument_is_refused_with_its_name(arg, name):
     rc, out = nodes(arg)
@@ -62,6 +62,7 @@ def params(*args):
     ("facility", 5, "goals.yaml"),
     ("deadend", 2, "deadend_goals.yaml"),
     ("deadend", 10, "deadend_goals.yaml"),
+    ("corridors", 2, "corridors_goals.yaml"),
 ])
 def test_layout_selects_world_map_and_goals(layout, robots, goals):
     p = params("robots:=%d" % robots, *(["layout:=" + layout] if layout else []))
@@ -74,7 +75,7 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--layout", "nowhere"], "--layout must be one of facility, deadend, got 'nowhere'"),
+    (["--layout", "nowhere"], "--layout must be one of facility, deadend, corridors, got 'nowhere'"),
     (["--robots", "11"], "robots must be 1..10"),
     (["--seed", "x"], "invalid int value: 'x'"),
     (["--obstacle-duration", "0"], "--obstacle-duration must be at least 1 s"),

@@ -22,6 +22,7 @@ NOT_SOURCES = {"catkin_ws", "test_results", "out", "node_modules", "build", "dev
 LASER_RANGE = {
     "launch/worlds/facility_*.world": (0.0, 30.0),     # the tutorials' 30 m laser (launch/README.md)
     "launch/worlds/deadend_*.world": (0.0, 30.0),
+    "launch/worlds/corridors_*.world": (0.0, 30.0),
     "sharing_replay/test/replay/data/corridor.world": (0.0, 30.0),
     "fleet_sim/test/data/room.world": (0.0, 30.0),
 }
@@ -48,7 +49,7 @@ STAGE43_WORLDS = [rel for rel in world_files() if not matching(rel, NOT_STAGE43)
 
 
 def test_the_repository_has_its_worlds_and_every_exception_still_exists():
-    assert len(STAGE43_WORLDS) >= 22, STAGE43_WORLDS       # 10 facility, 10 dead-end, corridor, room
+    assert len(STAGE43_WORLDS) >= 32, STAGE43_WORLDS       # 10 facility, 10 dead-end, 10 two-corridor, corridor, room
     for pattern in list(LASER_RANGE) + list(NOT_STAGE43):
         assert [rel for rel in world_files() if fnmatch.fnmatchcase(rel, pattern)], "%s matches no world" % pattern
 

@@ -27,7 +27,7 @@ from fleet_sim.world.raster import GridGeometry, paint_floorplan
 from fleet_tests.scenario import load_facility
 
 WORLDS = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "worlds")
-LAYOUTS = {"facility": "goals.yaml", "deadend": "deadend_goals.yaml"}
+LAYOUTS = {"facility": "goals.yaml", "deadend": "deadend_goals.yaml", "corridors": "corridors_goals.yaml"}
 INSCRIBED = 0.345     # fleet_nav's inscribed radius of the pr2 footprint (its start-up log line)
 CLEARANCE = 0.488 + 0.1   # fleet_nav's circumscribed radius of the padded footprint + its clearance_margin
 

@@ -6,7 +6,7 @@ import unittest
 
 import rospy
 
-from fleet_tests.scenario import Fleet
+from fleet_tests.scenario import Fleet, load_facility
 
 
 class FleetTestCase(unittest.TestCase):
@@ -17,7 +17,8 @@ class FleetTestCase(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node(cls.NODE)
-        cls.fleet = Fleet(2)
+        # The launch's layout (fleet.launch sets /fleet/goals): its goals, corridors and blocks.
+        cls.fleet = Fleet(2, load_facility(rospy.get_param("/fleet/goals", None)))
         cls.fleet.wait_ready(120.0)
 
     def pictures(self, name):
