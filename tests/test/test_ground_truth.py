@@ -59,3 +59,17 @@ def test_face_recall_counts_the_covered_part_of_the_free_face():
     none, _ = face_recall(face_cells(), RES, BLOCK, (13.6, 10.0), free=free)
     assert none == 0.0
     assert math.isnan(face_recall(face_cells(), RES, BLOCK, (13.6, 3.0), free=lambda x, y: False)[0])
+
+
+def test_run_figures_takes_the_viewer_from_the_sharers_track():
+    from fleet_tests.ground_truth import run_figures
+    blocks = {"block_short": dict(BLOCK, corridor="short")}
+    corridors = {"short": [11.6, 3.4, 14.2, 8.6]}
+    tracks = {"robot_0": [(0.0, 13.6, 1.0), (10.0, 13.6, 3.2)]}
+    messages = [(10.0, "robot_0", RES, face_cells()), (11.0, "robot_0", RES, [(13.0, 5.6)])]
+    got = run_figures(messages, tracks, blocks, corridors, margin=0.2)
+    assert got["cells"] == len(face_cells()) + 1
+    assert got["precision"] == pytest.approx(1.0 - 1.0 / (len(face_cells()) + 1), abs=1e-4)
+    assert got["off"] == [(13.0, 5.6)]
+    assert got["recall"] == {"block_short": 1.0}
+    assert run_figures([], tracks, blocks, corridors, 0.2)["recall"] == {}

@@ -20,6 +20,7 @@ import random
 import sys
 import time
 
+from fleet_tests.ground_truth import run_figures
 from fleet_tests.scenario import percentile, sys_message_bytes  # noqa: F401 (metrics, tests)
 
 
@@ -330,6 +331,10 @@ def main(argv=None):
     kinds = classify_obstacles(groups, cells, tracks, radius, walls, [block_rect(b) for b in blocks.values()],
                                evidence=evidence)
     recoveries = {r.name: [name for _t, _x, _y, name in r.recoveries] for r in fleet.robots}
+    tolerance = int(rospy.get_param("/robot_0/move_base/global_costmap/sharing_layer/static_tolerance", 3))
+    truth = run_figures([(t, m.source, m.resolution, [cell_centre(m, i) for i in m.marked_indexes])
+                         for name, t, m in to_fleet if m.source == name and m.marked_indexes],
+                        tracks, blocks, corridors, (tolerance + 1) * (grid.info.resolution if grid else 0.05))
     out = {
         "robots": args.robots,
         "seed": args.seed,
@@ -365,6 +370,7 @@ def main(argv=None):
                            for k, v in kinds.items()},
         "classification": {"robot_radius_m": radius, "margin_m": 0.1, "map": grid is not None,
                            "merge_distance_m": merge_distance, "obstacle_duration_s": lifetime},
+        "ground_truth": truth,
         "latency_ms": lat,
         "latency_ms_p50": percentile(lat, 50),
         "latency_ms_p99": percentile(lat, 99),

@@ -76,3 +76,36 @@ def face_recall(cells, resolution, block, viewer, free=lambda x, y: True, step=N
     missed = [(px, py) for px, py in points
               if not any(abs(px - x) <= half + reach / 2 and abs(py - y) <= half + reach / 2 for x, y in cells)]
     return 1.0 - len(missed) / float(len(points)), missed
+
+
+def run_figures(messages, tracks, blocks, corridors, margin):
+    """Precision over every cell the robots sent, and face recall per block someone shared.
+
+    messages: [(sim time, source robot, resolution, [(x, y) of each marked cell])] of the robots' own fleet
+    messages; tracks: name -> [(t, x, y)]; blocks: name -> block; corridors: name -> [min_x, min_y, max_x, max_y]
+    (a block's face counts between its corridor's walls, `margin` m in from each: never shareable nearer);
+    the viewer of a block is its sharer where it first sent a cell on it.
+    {"cells": n, "precision": p, "off": [first cells on no object], "recall": {block: r}}."""
+    from fleet_tests.bench import pose_at
+    cells = [c for _t, _s, _res, points in messages for c in points]
+    resolution = messages[0][2] if messages else 0.05
+    value, off = precision(cells, resolution, list(blocks.values()))
+    recall = {}
+    for name, block in sorted(blocks.items()):
+        first = [(t, source, p) for t, source, res, points in messages for p in points
+                 if on_block(p[0], p[1], res, block)]
+        if not first:
+            continue
+        t, source, _p = min(first)
+        viewer = pose_at(tracks.get(source, []), t)
+        if viewer is None:
+            continue
+        # The layouts' corridors run along y, and a block closes one across its width.
+        x0, _y0, x1, _y1 = corridors.get(block.get("corridor"), (-float("inf"), 0.0, float("inf"), 0.0))
+
+        def free(x, _y, x0=x0, x1=x1):
+            return x0 + margin < x < x1 - margin
+
+        recall[name] = round(face_recall(cells, resolution, block, viewer, free=free)[0], 4)
+    return {"cells": len(set(cells)), "precision": round(value, 4) if value == value else value,
+            "off": off[:20], "recall": recall}
