@@ -4,14 +4,17 @@ coaty_bridge node, and after every burst a fresh valid obstacle from an outside 
 reaches both handlers' lists (and a robot's own share reaches the other robot).
 
 Categories: garbage payloads, wrong geometry, stale / zero deadlines, duplicate uuids, updates of
-unknown uuids, echoes under a robot's own sourceId, a Discover flood, the stamp repro (100, 2^32,
-300), whole-map AddObstacle, and bad messages straight onto the handlers' from_fleet.
+unknown uuids, echoes under a robot's own sourceId, a Discover flood, the stamp repro (a stamp of
+2^32 between two fresh ones), whole-map AddObstacle, and bad messages straight onto the handlers'
+from_fleet. Valid messages carry fresh stamps (wall time, the nodes' ROS time): the handlers drop
+stamps older than obstacle_duration + max_clock_skew (issue 27, replays).
 """
 import json
 import os
 import random
 import subprocess
 import sys
+import time
 import uuid as uuidlib
 
 import pytest
@@ -32,7 +35,7 @@ WAIT = 20.0  # generous bound on a condition; the test waits for the condition, 
 
 
 def peer_update(**fields):
-    values = dict(uuid=str(uuidlib.uuid4()), source="peer_js", version=1, stamp=1000.0, frame_id="map",
+    values = dict(uuid=str(uuidlib.uuid4()), source="peer_js", version=1, stamp=time.time(), frame_id="map",
                   deadline=600, rectangle=(0.0, 0.0, 0.5, 0.5), resolution=RES, origin_x=OX, origin_y=OY,
                   size_x=SX, size_y=SY, marked=(2105, 2106), cleared=())
     values.update(fields)
@@ -199,16 +202,18 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
         fleet.publish("coaty/3/fleet/DSC/%s/%s" % (PEER, uuidlib.uuid4()), payload)
     fleet.assert_alive("a Discover flood")
 
-    # the stamp repro of issue 15: 100, 2^32, 300 -> 100 and 300 arrive everywhere
+    # the stamp repro of issue 15 (then 100, 2^32, 300; stale stamps are dropped since issue 27): the
+    # fresh ones on either side of a 2^32 stamp arrive everywhere
     stamped = {}
-    for offset, stamp in ((0.0, 100.0), (1.2, float(2 ** 32)), (2.4, 300.0)):
+    first, last = time.time(), time.time() + 1.0
+    for offset, stamp in ((0.0, first), (1.2, float(2 ** 32)), (2.4, last)):
         obj = codec.obstacle_to_object(peer_update(rectangle=(offset, 1.5, offset + 0.5, 2.0)), OT)
         obj["stamp"] = stamp
         stamped[stamp] = obj["uuid"]
         fleet.publish(adv_topic(), raw_json(obj))
     for robot in ROBOTS:
-        fleet.wait_list(robot, lambda uuids: stamped[100.0] in uuids and stamped[300.0] in uuids,
-                        "%s holds the obstacles stamped 100 and 300" % robot)
+        fleet.wait_list(robot, lambda uuids: stamped[first] in uuids and stamped[last] in uuids,
+                        "%s holds the obstacles stamped before and after 2^32" % robot)
         fleet.wait_list(robot, lambda uuids: stamped[float(2 ** 32)] not in uuids, "no 2^32 obstacle")
     fleet.assert_alive("the stamp repro")
 

@@ -20,6 +20,10 @@ CHANGES = st.tuples(CELLS, CELLS).filter(lambda mc: mc[0] or mc[1])
 RECTANGLES = [rect(0, 0, 1, 1), rect(0.5, 0.5, 1.5, 1.5), rect(1.9, 0, 2.5, 1), rect(3.2, 3, 4, 4),
               rect(6, 2, 7, 3), rect(-4, -4, -3.8, -2), rect(-3.5, -4, -2, -3.8), rect(-2.5, -2.5, -2, -2)]
 MERGE = 0.5
+# The RECTANGLES span 11 m. Merges that would exceed max_obstacle_extent are refused (issue 27),
+# and which pair is refused then depends on the order; these properties are about merging below
+# the caps (test_handler_authority.py covers the caps), so the cap is set out of the way.
+UNCAPPED = dict(merge_distance=MERGE, max_obstacle_extent=1000.0)
 
 
 
@@ -83,7 +87,7 @@ def expected_cells(msgs, group):
 @EXAMPLES
 @given(msgs=fleet_messages(), data=st.data())
 def test_observers_converge_whatever_the_order_and_duplicates(msgs, data):
-    observers = [Recorder("observer_%d" % i, merge_distance=MERGE) for i in range(3)]
+    observers = [Recorder("observer_%d" % i, **UNCAPPED) for i in range(3)]
     for r in observers:
         order = data.draw(st.permutations(msgs))
         dups = data.draw(st.lists(st.sampled_from(msgs), max_size=4))
@@ -109,7 +113,7 @@ def test_the_layer_is_told_the_same_cells_as_the_handler_holds(msgs, data):
     """The layer learns merged obstacles from the handler's messages (expired absorbed uuid, its
     cells re-sent under the survivor with their own stamps): replaying those by the same stamp
     rule gives the handler's cells."""
-    r = Recorder("observer", merge_distance=MERGE)
+    r = Recorder("observer", **UNCAPPED)
     for m in data.draw(st.permutations(msgs)):
         r.handler.on_external(m)
     layer = {}
@@ -137,7 +141,7 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
     whatever the order; when nothing was lost every robot holds the same obstacles and cells,
     and no authorised obstacle is lost (it is held, or merged into one that is)."""
     n = data.draw(st.integers(2, 3), label="robots")
-    robots = [Recorder("robot_%d" % i, uuids="r%d" % i, merge_distance=MERGE) for i in range(n)]
+    robots = [Recorder("robot_%d" % i, uuids="r%d" % i, **UNCAPPED) for i in range(n)]
     sent_count = [0] * n
     pending, delivered, authorised = [], [], set()
     received = [[] for _ in range(n)]
@@ -188,7 +192,7 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
 
     for i, r in enumerate(robots):
         # state = f(set): a fresh observer fed the same messages in a fixed order agrees
-        observer = Recorder("observer", merge_distance=MERGE)
+        observer = Recorder("observer", **UNCAPPED)
         for m in sorted(set(r.fleet) | set(received[i]), key=lambda m: (m.uuid, m.version, m.source,
                                                                           m.marked, m.cleared)):
             observer.handler.on_external(m)
@@ -254,7 +258,7 @@ def test_leases_the_greatest_arrival_plus_deadline_wins_whatever_the_order(data)
                               min_size=1, max_size=8), label="messages")
     obstacles = [update(uuid, marked=(v,), version=v, source="robot_%d" % v, deadline=d, rectangle=rc)
                  for uuid, d, rc, v in msgs]
-    r = Recorder("observer", merge_distance=MERGE)
+    r = Recorder("observer", **UNCAPPED)
     latest = {}
     for m in data.draw(st.permutations(obstacles + data.draw(st.lists(st.sampled_from(obstacles), max_size=3)))):
         r.clock.now += data.draw(st.sampled_from([0.0, 0.25, 3.0, 10.0]))

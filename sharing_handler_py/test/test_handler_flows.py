@@ -143,7 +143,7 @@ def test_internal_update_that_only_clears_carries_the_lifetime_left_when_it_is_s
     shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
     r.clock.now += 25.4
     sent = r.handler.on_internal_update(update(shared.uuid, cleared=(10,), version=2, source="robot_0",
-                                               deadline=60))
+                                               deadline=60, rectangle=rect(0, 0, 1, 1)))
     assert sent.deadline == 34  # 34.6 s left, rounded down
     assert r.handler.counters["renewals"] == 0
     late = Recorder("robot_1", clock=r.clock)

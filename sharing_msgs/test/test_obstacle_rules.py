@@ -18,6 +18,9 @@ BAD = [  # (changes, field, kind)
     (dict(source="a/b"), "source", rules.OUT_OF_RANGE),
     (dict(source="r" * 257), "source", rules.OUT_OF_RANGE),
     (dict(frame_id="m\0p"), "frame_id", rules.OUT_OF_RANGE),
+    # issue 27, item 8: lone UTF-16 surrogates are not UTF-8, so not a ROS string
+    (dict(source="robot_\ud800"), "source", rules.OUT_OF_RANGE),
+    (dict(frame_id="map\udfff"), "frame_id", rules.OUT_OF_RANGE),
     (dict(version=0), "version", rules.OUT_OF_RANGE),
     (dict(version=2 ** 63), "version", rules.OUT_OF_RANGE),
     (dict(version=2 ** 53), "version", rules.OUT_OF_RANGE),

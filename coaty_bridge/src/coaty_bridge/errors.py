@@ -70,3 +70,13 @@ class TooManyIndexesError(InvalidPayloadError):
 class ForgedSourceError(InvalidPayloadError):
     """An obstacle whose ``source`` is not the robot that sent it (authenticate_sources)."""
     reason = "forged_source"
+
+
+class FootprintTooLargeError(OutOfRangeError):
+    """A footprint advert wider than ``max_footprint_extent``: not a robot (issue 27, item 10)."""
+    reason = "footprint_too_large"
+
+
+class UnknownRobotError(InvalidPayloadError):
+    """A footprint advert of a robot that is not in ``known_robots`` (issue 27, item 10)."""
+    reason = "unknown_robot"

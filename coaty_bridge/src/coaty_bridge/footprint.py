@@ -32,12 +32,16 @@ from typing import Callable, Dict, List, Tuple
 from coaty_bridge.errors import (InvalidNameError, MissingFieldError, NonFiniteNumberError,
                                  OutOfRangeError, WrongTypeError)
 from coaty_bridge.topics import _NAME_RE, _UUID_RE
+from sharing_msgs import obstacle_rules
 
 DEFAULT_FOOTPRINT_OBJECT_TYPE = "org.fleetsharing.RobotFootprint"
 #: Most vertices of a footprint (the sharing core's kMaxFootprintPoints).
 MAX_POINTS = 1000
 #: Largest extent of a footprint, m (the sharing core's kMaxFootprintExtent): a robot, not a building.
 MAX_EXTENT = 50.0
+#: Default of the receiver's own cap (``max_footprint_extent``), m: an AGV, forklift or tugger is a
+#: few metres; a 35 m x 35 m "robot" (issue 27) is not.
+DEFAULT_MAX_FOOTPRINT_EXTENT = 5.0
 #: Largest |coordinate|, m: geometry_msgs/Point32 is float32, exact to a few cm up to here.
 MAX_COORDINATE = 1.0e6
 #: ROS time range (seconds), as for obstacles.
@@ -81,6 +85,10 @@ class RobotFootprint:
         object.__setattr__(self, "stamp", stamp)
         if not isinstance(self.frame_id, str) or not 0 < len(self.frame_id) <= MAX_TEXT or "\u0000" in self.frame_id:
             raise OutOfRangeError("frameId %s is not a frame name (1..%d characters)" % (_short(self.frame_id), MAX_TEXT))
+        for name, text in (("robot", self.robot), ("frameId", self.frame_id)):
+            why = obstacle_rules.lone_surrogate(text)
+            if why:  # else it fails later, in ROS serialisation of fleet_robots (issue 27, item 8)
+                raise OutOfRangeError("%s %s %s" % (name, _short(text), why))
         points = self.points
         if not isinstance(points, (list, tuple)):
             raise WrongTypeError("footprint %s is not a list of [x, y]" % _short(points))
@@ -190,6 +198,12 @@ class HeardRobot:
     """A robot's latest footprint and when this bridge heard it (its clock)."""
     footprint: RobotFootprint
     heard_at: float
+
+
+def extent(points):
+    """(width, height) of a footprint's bounding box, m."""
+    xs, ys = [x for x, _ in points], [y for _, y in points]
+    return (max(xs) - min(xs), max(ys) - min(ys))
 
 
 def centroid(points):

@@ -19,12 +19,20 @@ wins, as if every update of both had been sent for the surviving uuid, and later
 the absorbed uuid are applied to the survivor. Rectangles only grow, so two obstacles once
 within merge_distance stay so, and every robot ends with the same merged obstacles whatever
 the order the messages came in. A proposal within merge_distance of a live obstacle becomes an
-update of it.
+update of it. Merges stop at the caps (issue 27): two obstacles whose union would exceed
+max_obstacle_extent or max_obstacle_cells stay apart; only there can robots that saw the
+obstacles in different orders end with different groups.
 
 Leases (issue 12): a message that marks cells is an observation of the obstacle; the robot
 that made it gives it a full obstacle_duration again. A held obstacle expires at the latest
-arrival + deadline of any message for it (the greatest lease wins, whatever the order).
+arrival + deadline of any observation of it (the greatest lease wins, whatever the order).
 Messages that only clear cells carry the lifetime left, so they never extend it.
+
+Bounded authority (issue 27, authority.py): no peer can make an obstacle larger, longer-lived
+or newer than this handler's own caps. A deadline is cut to obstacle_duration on arrival (so a
+renewal reaches at most arrival + obstacle_duration), a message that does not mark cells can
+only bring the expiry closer (the earlier expiry is kept), a message beyond the extent, cell or
+version caps is dropped, and two obstacles whose union would exceed the caps are not merged.
 """
 import logging
 import math
@@ -32,6 +40,7 @@ import uuid as uuidlib
 from dataclasses import dataclass
 from typing import Tuple
 
+from sharing_handler_py.authority import PeerPolicy
 from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
 from sharing_handler_py.nearby import RectangleIndex
 from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
@@ -59,11 +68,19 @@ DROP_REASONS = (
     "bad_stamp",            # a header stamp outside the ROS time range (or not finite)
     "rectangle_outside_grid",  # a rectangle reaching beyond the grid it names
     "empty_update",         # a fleet message without any marked or cleared cell
+    # issue 27, bounded authority (authority.py)
+    "oversized_rectangle",  # a rectangle (own updates: the grown union) beyond max_obstacle_extent
+    "too_many_obstacle_cells",  # a message with more cells than one obstacle may hold
+    "implausible_version",  # more than max_version_step beyond the highest version seen
+    "stale_stamp",          # stamped longer ago than obstacle_duration + max_clock_skew
+    "future_stamp",         # stamped more than max_clock_skew ahead of our clock
 )
 
 #: Counters besides the drops.
 EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_out",
-                  "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals")
+                  "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals",
+                  "capped_deadlines",  # a peer's deadline cut to obstacle_duration
+                  "merges_refused")    # two obstacles left apart: their union exceeds the caps
 
 
 @dataclass(frozen=True)
@@ -198,9 +215,18 @@ class _Entry:
         return False
 
     def note_deadline(self, now, deadline):
-        """Another message for this obstacle arrived at `now` saying `deadline` s remain: the
-        greater lease wins."""
+        """An observation of this obstacle (a message marking cells) arrived at `now` saying
+        `deadline` s remain (already capped by the policy): the greater lease wins."""
         self.expires_at = max(self.expires_at, now + deadline)
+
+    def note_lease(self, now, deadline, observed):
+        """A fleet message arrived at `now` with `deadline` s left (capped by the policy). Only an
+        observation renews; anything else keeps the earlier expiry, so a peer's clear or stale
+        copy can never push the lease back."""
+        if observed:
+            self.note_deadline(now, deadline)
+        else:
+            self.expires_at = min(self.expires_at, now + deadline)
 
     def cells(self):
         if self.sorted_cells is None:
@@ -233,11 +259,15 @@ class SharingHandler:
         merge_distance: metres; obstacles (and proposals) whose rectangles lie this close are
             one obstacle (issue 12, merging). A robot needs at least twice its inscribed radius
             to pass between two obstacles, so a smaller gap is no passage anyway.
+        max_obstacle_extent, max_obstacle_cells, max_version_step, max_clock_skew: the caps of
+            every message and merge (authority.PeerPolicy); max_clock_skew None = stamps are
+            not compared with the clock.
     """
 
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
-                 max_deferred=10000, max_obstacle_extent=10.0, merge_distance=0.5):
+                 max_deferred=10000, max_obstacle_extent=10.0, merge_distance=0.5,
+                 max_obstacle_cells=0, max_version_step=1000000, max_clock_skew=None):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -261,6 +291,9 @@ class SharingHandler:
         self._max_deferred = max_deferred
         self._max_extent = max_obstacle_extent
         self._merge_distance = float(merge_distance)
+        self._policy = PeerPolicy(max_extent=max_obstacle_extent, max_lifetime=self._deadline,
+                                  max_obstacle_cells=max_obstacle_cells, max_version_step=max_version_step,
+                                  max_clock_skew=max_clock_skew)
         self._entries = {}      # uuid -> _Entry
         self._nearby = RectangleIndex()  # uuid -> rectangle of every entry, for merging
         self._aliases = {}      # uuid of an absorbed obstacle -> uuid that absorbed it
@@ -334,10 +367,13 @@ class SharingHandler:
                           self.robot_name, obstacle.geometry)
                 self.set_geometry(obstacle.geometry)
             self._check_grid(obstacle)
+            # the layer's topic is open to any ROS node: the same caps as for a peer
+            self._policy.check_extent(obstacle.rectangle, "proposal rectangle")
+            self._policy.check_cells(len(obstacle.marked), self._geometry, "proposal")
         except InvalidMessageError as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
-        near = self._near(obstacle.rectangle)
+        near = self._near(obstacle.rectangle, len(obstacle.marked))
         if near is not None:
             return self._merge_proposal(obstacle, near)
         return self._authorise(obstacle, self._deadline)
@@ -366,6 +402,9 @@ class SharingHandler:
             if obstacle.version <= entry.max_version and entry.max_version >= obstacle_rules.MAX_VERSION:
                 raise InvalidMessageError("bad_version", "obstacle %s is at the last version %d"
                                           % (obstacle.uuid, entry.max_version))
+            # what goes out must pass every peer's caps; the own obstacle grows by union
+            self._policy.check_extent(entry.rectangle.union(obstacle.rectangle), "grown rectangle")
+            self._policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "update")
         except InvalidMessageError as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
@@ -430,12 +469,19 @@ class SharingHandler:
                            self.robot_name, obstacle.uuid, obstacle.version, obstacle.source)
                 return False
             self._check_grid(obstacle)
+            if obstacle.uuid in self._aliases:
+                obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
+            entry = self._entries.get(obstacle.uuid)
+            self._check_authority(obstacle, entry)
         except InvalidMessageError as err:
             self.reject(obstacle.source, obstacle.uuid, err)
             return False
-        if obstacle.uuid in self._aliases:
-            obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
-        entry = self._entries.get(obstacle.uuid)
+        if obstacle.deadline > self._policy.max_lifetime:
+            self._counters["capped_deadlines"] += 1
+            _log.info("%s: message %s v%d from %s says %d s left; cut to obstacle_duration %d s",
+                      self.robot_name, obstacle.uuid, obstacle.version, obstacle.source,
+                      obstacle.deadline, self._policy.max_lifetime)
+            obstacle = obstacle.replace(deadline=self._policy.cap_deadline(obstacle.deadline))
         if entry is None:
             entry = _Entry(obstacle, self._clock())
             self._entries[obstacle.uuid] = entry
@@ -448,7 +494,7 @@ class SharingHandler:
             rectangle = entry.rectangle
             changed = entry.apply(obstacle)
             grown = entry.rectangle is not rectangle
-            entry.note_deadline(self._clock(), obstacle.deadline)
+            entry.note_lease(self._clock(), obstacle.deadline, observed=bool(obstacle.marked))
         self._counters["updates_in"] += 1
         self._to_layer(obstacle)
         if changed:
@@ -489,13 +535,19 @@ class SharingHandler:
             obstacle = obstacle.replace(marked=marked)
             check_message_values(obstacle)
             check_indexes(obstacle, self._geometry, self._max_cells)
+            self._policy.check_cells(len(marked), self._geometry, "rectangle %s" % rectangle)
         except InvalidMessageError as err:
             raise InvalidRequestError(str(err)) from err
         self._counters["manual"] += 1
-        near = self._near(rectangle)
-        if near is not None:
-            return self._merge_proposal(obstacle, near)
-        return self._authorise(obstacle, int(deadline) or self._deadline)
+        near = self._near(rectangle, len(marked))
+        if near is None:
+            return self._authorise(obstacle, int(deadline) or self._deadline)
+        update = self._merge_proposal(obstacle, near)
+        if update is None:
+            # the update it would become was refused (and counted): say so, never return None
+            raise InvalidRequestError("rectangle %s lies within merge_distance of obstacle %s, and the "
+                                      "update of it was refused (see the log)" % (rectangle, near.uuid))
+        return update
 
     def expire(self):
         """Removes every obstacle whose deadline has passed since its local arrival (no message
@@ -506,8 +558,9 @@ class SharingHandler:
             entry = self._entries.pop(uuid)
             self._nearby.remove(uuid)
             # Remember the uuid (and those it absorbed) at least obstacle_duration more, so a
-            # late message cannot resurrect the obstacle on this robot only.
-            until = now + max(self._deadline, entry.deadline)
+            # late message cannot resurrect the obstacle on this robot only; with stamps checked,
+            # until no message for it can pass the stamp check (a replay, issue 27).
+            until = now + max(self._policy.tombstone_time, entry.deadline)
             self._tombstones[uuid] = until
             for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
                 del self._aliases[alias]
@@ -547,12 +600,16 @@ class SharingHandler:
         self._on_change()
         return shared
 
-    def _near(self, rectangle):
+    def _near(self, rectangle, cells):
         """The held obstacle (smallest uuid) whose rectangle overlaps `rectangle` or lies within
-        merge_distance of it, or None."""
-        near = [u for u in self._nearby.near(rectangle, self._merge_distance)
-                if self._mergeable(self._entries[u].rectangle, rectangle)]
-        return self._entries[min(near)] if near else None
+        merge_distance of it and that stays within the caps with `cells` more, or None."""
+        near = sorted(u for u in self._nearby.near(rectangle, self._merge_distance)
+                      if self._mergeable(self._entries[u].rectangle, rectangle))
+        for uuid in near:
+            entry = self._entries[uuid]
+            if self._policy.fits(entry.rectangle.union(rectangle), len(entry.present) + cells, entry.geometry):
+                return entry
+        return None
 
     def _mergeable(self, a, b):
         """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the
@@ -588,20 +645,43 @@ class SharingHandler:
         return update
 
     def _merge_around(self, uuid):
-        """Restores the invariant "no two held obstacles lie within merge_distance" after the
-        rectangle of `uuid` grew or it was added: the smaller uuid absorbs the other, until
-        nothing near is left (an absorbed rectangle can reach a third obstacle)."""
+        """Restores the invariant "no two held obstacles lie within merge_distance, unless their
+        union exceeds the caps" after the rectangle of `uuid` grew or it was added: the smaller
+        uuid absorbs the other, until nothing near is left (an absorbed rectangle can reach a
+        third obstacle)."""
+        refused = set()  # neighbours whose union with this obstacle would exceed the caps
         while True:
             entry = self._entries[uuid]
             self._nearby.put(uuid, entry.rectangle)
             near = sorted(u for u in self._nearby.near(entry.rectangle, self._merge_distance)
-                          if u != uuid and self._mergeable(self._entries[u].rectangle, entry.rectangle))
+                          if u != uuid and u not in refused
+                          and self._mergeable(self._entries[u].rectangle, entry.rectangle))
             if not near:
                 return uuid
-            group = sorted(near + [uuid])
-            for absorbed in group[1:]:
-                self._absorb(group[0], absorbed)
-            uuid = group[0]
+            # One pair at a time: absorbing is a join, so the merged obstacle is the same in any
+            # order; checked pairwise, no merge makes an obstacle larger than the caps.
+            survivor, absorbed = sorted((uuid, near[0]))
+            if not self._merge_fits(self._entries[survivor], self._entries[absorbed]):
+                refused.add(near[0])
+                continue
+            self._absorb(survivor, absorbed)
+            uuid = survivor
+
+    def _merge_fits(self, a, b):
+        """True when the union of two held obstacles stays within the caps; else counted and logged."""
+        rectangle = a.rectangle.union(b.rectangle)
+        cells = len(a.present) + len(b.present)
+        if cells > self._policy.cell_cap(a.geometry):
+            cells = len(a.present | b.present)
+        if self._policy.fits(rectangle, cells, a.geometry):
+            return True
+        self._counters["merges_refused"] += 1
+        _log.warning("%s: obstacles %s %s (from %s) and %s %s (from %s) lie within merge_distance but "
+                     "are not merged: the union %s with %d cells exceeds max_obstacle_extent %g m or "
+                     "max_obstacle_cells %d", self.robot_name, a.uuid, a.rectangle, a.source, b.uuid,
+                     b.rectangle, b.source, rectangle, cells, self._policy.max_extent,
+                     self._policy.cell_cap(a.geometry))
+        return False
 
     def _absorb(self, survivor_uuid, absorbed_uuid):
         survivor, absorbed = self._entries[survivor_uuid], self._entries.pop(absorbed_uuid)
@@ -637,6 +717,17 @@ class SharingHandler:
             raise InvalidMessageError("own_source", "message claims to come from this robot")
         if obstacle.uuid in self._tombstones:
             raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+        self._policy.check_stamp(obstacle.stamp, self._clock())
+
+    def _check_authority(self, obstacle, entry):
+        """The receiver's caps (issue 27) on one message: its rectangle, its cells, its version.
+        Each message is judged on its own (not on what it would grow the obstacle to), so the
+        verdict does not depend on the order messages arrive in and robots stay convergent;
+        merges, which could join many messages' worth, are capped apart (_merge_fits)."""
+        policy = self._policy
+        policy.check_extent(obstacle.rectangle)
+        policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "message")
+        policy.check_version(obstacle.version, 0 if entry is None else entry.max_version)
 
     def _check_grid(self, obstacle):
         if not self._geometry.matches(obstacle.geometry):

@@ -90,6 +90,9 @@ def read_params():
         max_obstacle_extent=rospy.get_param("~max_obstacle_extent", 10.0),
         merge_distance=rospy.get_param("~merge_distance", 0.5),
         map_topic=rospy.get_param("~map_topic", "/map"),
+        max_obstacle_cells=rospy.get_param("~max_obstacle_cells", 0),
+        max_version_step=rospy.get_param("~max_version_step", 1000000),
+        max_clock_skew=rospy.get_param("~max_clock_skew", 5.0),
     )
 
 
@@ -123,7 +126,10 @@ class HandlerNode:
             on_change=self._publish_list,
             max_cells_per_message=params.max_cells_per_message,
             max_obstacle_extent=params.max_obstacle_extent,
-            merge_distance=params.merge_distance)
+            merge_distance=params.merge_distance,
+            max_obstacle_cells=params.max_obstacle_cells,
+            max_version_step=params.max_version_step,
+            max_clock_skew=params.clock_skew)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
@@ -136,6 +142,9 @@ class HandlerNode:
                       "map %s, snapshot %s)", params.robot_name, params.obstacle_duration,
                       params.merge_distance, params.expiry_rate, params.map_topic,
                       params.snapshot_file or "off")
+        if params.clock_skew is None:
+            rospy.logwarn("%s: max_clock_skew = -1: stamps of fleet messages are not checked, so a replayed "
+                          "message is refused only while its uuid is remembered as expired", params.robot_name)
 
     def _deliver(self, publisher, obstacle):
         try:

@@ -268,6 +268,11 @@ class HandlerParams:
     map_topic: str = "/map"
     max_obstacle_extent: float = 10.0  # m, longest side of a manually added obstacle
     merge_distance: float = 0.5        # m, obstacles and proposals this close are one obstacle
+    # issue 27, bounded authority of a peer (authority.py)
+    max_obstacle_cells: int = 0        # cells one obstacle may hold; 0 = a max_obstacle_extent square
+    max_version_step: int = 1000000    # a version more than this beyond the highest seen is dropped
+    max_clock_skew: float = 5.0        # s; stamps older than obstacle_duration + this or ahead by more
+                                       # than this are dropped; -1 = stamps not checked
 
     def __post_init__(self):
         def bad(name, why):
@@ -298,3 +303,16 @@ class HandlerParams:
         value = self.merge_distance
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < 1e6:
             bad("merge_distance", "must be a number of metres in [0, 1e6)")
+        for name, low in (("max_obstacle_cells", 0), ("max_version_step", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                bad(name, "must be an integer >= %d" % low)
+        value = self.max_clock_skew
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                value == -1 or 0 <= value <= 3600):
+            bad("max_clock_skew", "must be 0..3600 seconds, or -1 (stamps not checked)")
+
+    @property
+    def clock_skew(self):
+        """max_clock_skew as the handler takes it: None when stamps are not checked."""
+        return None if self.max_clock_skew == -1 else float(self.max_clock_skew)

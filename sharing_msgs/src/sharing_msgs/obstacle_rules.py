@@ -33,6 +33,9 @@ RECTANGLE_MARGIN_CELLS = 1.0
 
 UUID_RE = re.compile(r"^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{12}$")
 _FORBIDDEN_IN_NAME = re.compile(r"[\u0000+#/]")
+#: A lone UTF-16 surrogate: JSON's "\ud800" escape makes one, Python keeps it in a str, and ROS
+#: serialisation (UTF-8) then fails with a traceback far from the input (issue 27, item 8).
+_SURROGATE = re.compile("[\ud800-\udfff]")
 
 #: Kinds of fault (ObstacleFieldError.kind).
 WRONG_TYPE = "wrong_type"
@@ -57,6 +60,15 @@ class ObstacleFieldError(ValueError):
 def _short(value):
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def lone_surrogate(text):
+    """Why ``text`` cannot be sent as UTF-8 (it holds a lone UTF-16 surrogate), or "" when it can."""
+    bad = _SURROGATE.search(text)
+    if not bad:
+        return ""
+    return "contains the lone UTF-16 surrogate U+%04X at index %d: not encodable as UTF-8" % (
+        ord(bad.group()), bad.start())
 
 
 def is_uuid(value):
@@ -88,6 +100,9 @@ def _text(field, value, allow_empty):
         raise ObstacleFieldError(field, EMPTY, value, "is empty")
     if len(value) > MAX_TEXT:
         raise ObstacleFieldError(field, OUT_OF_RANGE, value, "is longer than %d characters" % MAX_TEXT)
+    why = lone_surrogate(value)
+    if why:
+        raise ObstacleFieldError(field, OUT_OF_RANGE, value, why)
 
 
 def check_values(uuid, source, version, stamp, frame_id, deadline, rectangle, resolution,
