@@ -106,3 +106,29 @@ def test_run_broker_publishes_its_url_and_bridges_wait_for_it(ros_graph, observe
         socket.create_connection(("127.0.0.1", port), timeout=1).close()
     node.send_signal(signal.SIGINT)
     node.wait(10)
+
+
+def test_node_says_where_its_broker_url_came_from_and_warns_while_unreachable(ros_graph, wait_for):
+    """A leftover private ~broker_url (a closed port) beside the launch's ~broker_url_param: the node
+    says at start that it overrides /fleet/broker_url, logs the URL with its origin, and WARNs that
+    the broker is unreachable (issue 28: robots sat outside the fleet with no word)."""
+    import threading
+    from coaty_bridge.broker import free_port
+    leftover = "mqtt://127.0.0.1:%d" % free_port()
+    subprocess.run(["rosparam", "set", "/fleet/broker_url", "mqtt://127.0.0.1:1883"], env=ros_graph.env, check=True)
+    node = ros_graph.bridge("robot_2", "broker_url:=" + leftover, "broker_url_param:=/fleet/broker_url",
+                            "subscriber_wait:=0.0")
+    lines = []
+    threading.Thread(target=lambda: lines.extend(iter(node.stdout.readline, "")), daemon=True).start()
+
+    def expect(*parts):
+        try:
+            wait_for(lambda: any(all(p in line for p in parts) for line in list(lines)), timeout=20,
+                     what="a line with %s" % (parts,))
+        except AssertionError as err:
+            raise AssertionError("%s; node output:\n%s" % (err, "".join(lines[-30:]))) from None
+    private = "/robot_2/coaty_bridge/broker_url"
+    expect("robot_2", private, leftover, "overrides", "/fleet/broker_url", "rosparam delete")
+    expect("robot_2", "broker " + leftover, "from private parameter " + private)
+    expect("robot_2", leftover, "unreachable")
+    assert node.poll() is None

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import paho.mqtt.client as mqtt
 
 from coaty_bridge import codec, footprint as footprints, lifetimes
-from coaty_bridge.errors import CoatyError, ForgedSourceError
+from coaty_bridge.errors import CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError
 from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
 
@@ -79,6 +79,15 @@ class BridgeConfig:
     # metres; fleet-wide. Adverts go out per square of the map and each bridge hears the 3 x 3
     # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet.
     footprint_area_size: float = 10.0
+    # metres; a footprint advert wider or longer than this is not a robot and is dropped
+    max_footprint_extent: float = footprints.DEFAULT_MAX_FOOTPRINT_EXTENT
+    # robot names whose footprint adverts are taken; empty = any robot (see README "Fleet robot
+    # footprints": with authenticate_sources, any robot with broker credentials)
+    known_robots: tuple = ()
+    # s: while the broker cannot be reached, a WARN at the first failed attempt and then this often
+    broker_warn_interval: float = 30.0
+    # where broker_url came from (which parameter), for log lines; set by the node
+    broker_url_source: str = "the default"
     address: BrokerAddress = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -132,7 +141,7 @@ class BridgeConfig:
                 fail(name, "must be an integer >= %d" % low)
         if not isinstance(self.compact_indexes, bool):
             fail("compact_indexes", "must be true or false")
-        for name in ("reconnect_min_delay", "reconnect_max_delay", "discover_window"):
+        for name in ("reconnect_min_delay", "reconnect_max_delay", "discover_window", "broker_warn_interval"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e6:
                 fail(name, "must be a positive number of seconds")
@@ -143,6 +152,18 @@ class BridgeConfig:
                 area == 0 or footprints.MIN_AREA_SIZE <= area <= footprints.MAX_AREA_SIZE):
             fail("footprint_area_size", "must be 0 (one area) or %g..%g m; all robots of a fleet need the same"
                  % (footprints.MIN_AREA_SIZE, footprints.MAX_AREA_SIZE))
+        extent = self.max_footprint_extent
+        if isinstance(extent, bool) or not isinstance(extent, (int, float)) or not (
+                0.1 <= extent <= footprints.MAX_EXTENT):
+            fail("max_footprint_extent", "must be 0.1..%g m" % footprints.MAX_EXTENT)
+        if isinstance(self.known_robots, str) or not isinstance(self.known_robots, (list, tuple)):
+            fail("known_robots", "must be a list of robot names")
+        for name in self.known_robots:
+            try:
+                check_name(name, "known robot")
+            except CoatyError as err:
+                fail("known_robots", err)
+        object.__setattr__(self, "known_robots", tuple(self.known_robots))
 
     @property
     def use_tls(self):
@@ -153,6 +174,48 @@ class BridgeConfig:
         return codec.CodecLimits(self.max_payload_bytes, self.max_indexes)
 
 
+class BrokerUrlChoice:
+    """Which broker URL the bridge uses and where it came from (a parameter's full name, or the
+    default); ``warning`` says when a private ~broker_url overrides the parameter the launch named."""
+
+    def __init__(self, url, source, warning=None):
+        self.url, self.source, self.warning = url, source, warning
+
+
+def choose_broker_url(params, wait, default=None):
+    """The bridge node's broker URL (``params``: has(name), get(name[, default]), resolve(name), as
+    rospy's parameter functions): the private ~broker_url if set; else the parameter that ~broker_url_param
+    names (``wait(name)`` waits for it, as run_broker sets it); else ``default``.
+
+    A private ~broker_url stays on the master after the launch that set it ends, and wins over the
+    ~broker_url_param of every later launch of the node under the same name: that is said in the
+    returned warning, with both names and values."""
+    private = params.resolve("~broker_url")
+    url_param = params.get("~broker_url_param", "") if params.has("~broker_url_param") else ""
+    if not isinstance(url_param, str):
+        raise ValueError("parameter broker_url_param = %r: must be a parameter name" % (url_param,))
+    named = params.resolve(url_param) if url_param else ""
+    if params.has("~broker_url"):
+        url = params.get("~broker_url")
+        source = "private parameter %s" % private
+        if not url_param:
+            return BrokerUrlChoice(url, source)
+        if params.has(url_param):
+            other = params.get(url_param)
+            if other == url:
+                return BrokerUrlChoice(url, source + " (the same as %s)" % named)
+            state = "which is %r" % (other,)
+        else:
+            state = "not set yet"
+        return BrokerUrlChoice(url, source, (
+            "private parameter %s = %r overrides ~broker_url_param %s (%s); if it is a leftover of an "
+            "earlier run on this master, remove it: rosparam delete %s" % (private, url, named, state, private)))
+    if url_param:
+        return BrokerUrlChoice(wait(url_param), "parameter %s (named by ~broker_url_param)" % named)
+    return BrokerUrlChoice(BridgeConfig.broker_url if default is None else default,
+                           "the default (neither ~broker_url nor ~broker_url_param is set)")
+
+
 def _make_paho_client(client_id):
     if hasattr(mqtt, "CallbackAPIVersion"):  # paho-mqtt >= 2.0
         return mqtt.Client(mqtt.CallbackAPIVersion.VERSION1, client_id=client_id, clean_session=True)
@@ -161,6 +224,8 @@ def _make_paho_client(client_id):
 
 #: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
 OWN_LOG_PER_OBSTACLE = 200
+#: s after start() without a connection (and no failed attempt yet) before the first WARN.
+FIRST_UNREACHABLE_WARN_AFTER = 5.0
 
 
 class CoatyBridgeClient:
@@ -190,6 +255,13 @@ class CoatyBridgeClient:
         self._ever_connected = False
         self._stopping = False
         self._killed = False
+        # unreachable broker: when the current outage began (None: connected or not started), failed
+        # connection attempts in it, when it was last reported (None: not yet)
+        self._down_since = None
+        self._failed_attempts = 0
+        self._last_unreachable_warn = None
+        self._watch_stop = threading.Event()
+        self._watch_thread = None
         ns = config.namespace
         self._identity = codec.identity_object(self.identity_id, config.robot_name)
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
@@ -215,6 +287,7 @@ class CoatyBridgeClient:
                                        max_delay=config.reconnect_max_delay)
         self._mqtt.on_connect = self._on_connect
         self._mqtt.on_disconnect = self._on_disconnect
+        self._mqtt.on_connect_fail = self._on_connect_fail
         self._mqtt.on_message = self.on_message
 
     # ------------------------------------------------------------ lifecycle
@@ -222,8 +295,46 @@ class CoatyBridgeClient:
     def start(self):
         """Connects in the background; reconnects with backoff until stop()."""
         address = self.config.address
+        with self._lock:
+            self._down_since = self._clock()
         self._mqtt.connect_async(address.host, address.port, keepalive=self.config.keepalive)
         self._mqtt.loop_start()
+        # check_broker on a wall-clock second: the MQTT thread sleeps in its backoff, and ROS time may stand
+        self._watch_thread = threading.Thread(target=self._watch_broker, name="coaty_bridge broker watch",
+                                              daemon=True)
+        self._watch_thread.start()
+
+    def _watch_broker(self):
+        while not self._watch_stop.wait(1.0):
+            try:
+                self.check_broker()
+            except Exception as err:  # noqa: BLE001 - a log problem must not end the watch
+                LOG.error("%s: broker watch: %s: %s", self.config.robot_name, type(err).__name__, err)
+
+    def check_broker(self):
+        """WARNs while the broker cannot be reached: at the first failed attempt (or
+        FIRST_UNREACHABLE_WARN_AFTER s after start without a connection) and then every
+        ``broker_warn_interval`` s of the client's clock. Returns True when it warned."""
+        now = self._clock()
+        with self._lock:
+            if self._connected or self._down_since is None or self._stopping:
+                return False
+            down_for = now - self._down_since
+            if self._last_unreachable_warn is None:
+                due = self._failed_attempts > 0 or down_for >= min(FIRST_UNREACHABLE_WARN_AFTER,
+                                                                    self.config.broker_warn_interval)
+            else:
+                due = now - self._last_unreachable_warn >= self.config.broker_warn_interval
+            if not due:
+                return False
+            self._last_unreachable_warn = now
+            self._counters["broker_unreachable_warnings"] += 1
+            attempts, queued = self._failed_attempts, len(self._queue)
+        LOG.warning("%s: broker %s unreachable for %.0f s (%d connection attempts failed; broker_url from %s); "
+                    "not in the fleet: nothing is shared or received, %d obstacle updates queued; retrying "
+                    "every %g s at most", self.config.robot_name, self.config.broker_url, down_for, attempts,
+                    self.config.broker_url_source, queued, self.config.reconnect_max_delay)
+        return True
 
     def stop(self, timeout=2.0):
         """Deadvertises the Identity explicitly (a clean disconnect discards the will),
@@ -231,6 +342,7 @@ class CoatyBridgeClient:
         if self._killed:
             return
         self._stopping = True
+        self._watch_stop.set()
         if self._connected:
             try:
                 info = self._mqtt.publish(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=1)
@@ -244,6 +356,7 @@ class CoatyBridgeClient:
         """Drops the connection without a Deadvertise, as a crash would (tests only):
         the broker then publishes the last will."""
         self._stopping = self._killed = True
+        self._watch_stop.set()
         sock = self._mqtt.socket()
         self._mqtt.loop_stop()
         if sock is not None:
@@ -417,11 +530,23 @@ class CoatyBridgeClient:
 
     # ------------------------------------------------------- paho callbacks
 
+    def _on_connect_fail(self, client, userdata):
+        """paho: a connection attempt failed (nothing listens, no route, TLS handshake, ...)."""
+        with self._lock:
+            self._counters["connect_failures"] += 1
+            self._failed_attempts += 1
+        self.check_broker()
+
     def _on_connect(self, client, userdata, flags, rc, properties=None):
         if rc != 0:
-            self._count("connect_failures")
-            LOG.warning("%s: broker %s refused the connection: %s", self.config.robot_name,
-                        self.config.broker_url, mqtt.connack_string(rc))
+            with self._lock:
+                self._counters["connect_failures"] += 1
+                self._failed_attempts += 1
+                first = self._last_unreachable_warn is None
+                if first:
+                    self._last_unreachable_warn = self._clock()  # this line is the outage's first warning
+            LOG.warning("%s: broker %s refused the connection: %s (broker_url from %s)", self.config.robot_name,
+                        self.config.broker_url, mqtt.connack_string(rc), self.config.broker_url_source)
             return
         sock = client.socket()
         if sock is not None and hasattr(sock, "setsockopt"):
@@ -435,8 +560,15 @@ class CoatyBridgeClient:
             if self._ever_connected:
                 self._counters["reconnects"] += 1
             self._ever_connected = True
-        LOG.info("%s: connected to %s as Coaty agent %s", self.config.robot_name,
-                 self.config.broker_url, self.identity_id)
+            down_since, warned = self._down_since, self._last_unreachable_warn is not None
+            self._down_since = self._last_unreachable_warn = None
+            self._failed_attempts = 0
+        if warned:
+            LOG.info("%s: connected to %s as Coaty agent %s, after %.0f s unreachable", self.config.robot_name,
+                     self.config.broker_url, self.identity_id, self._clock() - down_since)
+        else:
+            LOG.info("%s: connected to %s as Coaty agent %s", self.config.robot_name,
+                     self.config.broker_url, self.identity_id)
         payload = codec.advertise_payload(self._identity)
         ns = self.config.namespace
         self._send(str(Topic(ns, "ADV", self.identity_id, core_type="Identity")), payload, queue=False)
@@ -448,6 +580,10 @@ class CoatyBridgeClient:
     def _on_disconnect(self, client, userdata, rc, properties=None):
         with self._lock:
             self._connected = False
+            if not self._stopping and self._down_since is None:
+                # this line is the outage's first warning; check_broker repeats it while it lasts
+                self._down_since = self._last_unreachable_warn = self._clock()
+                self._failed_attempts = 0
         if not self._stopping:
             self._count("disconnects")
             LOG.warning("%s: lost the broker %s (rc %s); reconnecting with backoff",
@@ -531,6 +667,19 @@ class CoatyBridgeClient:
                                                                                 footprint.robot):
             self._drop(ForgedSourceError("footprint of %r was sent by %s, not by that robot's identity"
                                          % (footprint.robot, topic.source_id)), str(topic), b"")
+            return
+        # Bounded authority (issue 27, item 10): a peer's footprint is cells no layer shares, so a
+        # made-up or building-sized one would blind every robot's sharing around it.
+        if self.config.known_robots and footprint.robot not in self.config.known_robots:
+            self._drop(UnknownRobotError("footprint of robot %r (sourceId %s): not in known_robots"
+                                         % (footprint.robot, topic.source_id)), str(topic), b"")
+            return
+        width, height = footprints.extent(footprint.points)
+        if max(width, height) > self.config.max_footprint_extent:
+            self._drop(FootprintTooLargeError(
+                "footprint of robot %r (sourceId %s) is %.2f m x %.2f m, larger than max_footprint_extent %g m"
+                % (footprint.robot, topic.source_id, width, height, self.config.max_footprint_extent)),
+                str(topic), b"")
             return
         if footprint.robot == self.config.robot_name:
             # another agent under our name (or a replay of ours): this robot is not a fleet robot to itself

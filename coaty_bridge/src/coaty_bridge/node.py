@@ -18,7 +18,7 @@ from sharing_msgs.msg import RobotFootprint, RobotFootprintArray, SharedObstacle
 from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 
-from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_url
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue, centroid, moved
@@ -29,7 +29,8 @@ LOG = logging.getLogger(__name__)
 _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
-           "reconnect_max_delay", "discover_window", "authenticate_sources", "footprint_area_size")
+           "reconnect_max_delay", "discover_window", "authenticate_sources", "footprint_area_size",
+           "broker_warn_interval", "max_footprint_extent", "known_robots")
 
 
 def msg_to_update(msg):
@@ -133,20 +134,37 @@ def default_robot_name():
     return rospy.get_namespace().strip("/").replace("/", "_")
 
 
+class RosParams:
+    """The parameter server as choose_broker_url sees it (tests pass a dict-backed stand-in)."""
+
+    has = staticmethod(rospy.has_param)
+    get = staticmethod(rospy.get_param)
+    resolve = staticmethod(rospy.resolve_name)
+
+
 def read_config():
-    """Reads the private parameters into a BridgeConfig; ValueError names a bad one."""
+    """Reads the private parameters into a BridgeConfig and the broker URL's origin; ValueError
+    names a bad one. Returns (BridgeConfig, BrokerUrlChoice)."""
     kwargs = {}
     for name in _PARAMS:
-        if rospy.has_param("~" + name):
+        if name != "broker_url" and rospy.has_param("~" + name):
             kwargs[name] = rospy.get_param("~" + name)
-    url_param = rospy.get_param("~broker_url_param", "")
-    if url_param and "broker_url" not in kwargs:
-        kwargs["broker_url"] = wait_for_param(url_param, rospy.get_param("~broker_wait", 30.0))
+    broker_wait = rospy.get_param("~broker_wait", 30.0)
+    choice = choose_broker_url(RosParams, lambda name: wait_for_param(name, broker_wait))
     robot_name = rospy.get_param("~robot_name", "") or default_robot_name()
     if not robot_name:
         raise ValueError("parameter robot_name = '': not set and the node runs in the root "
                          "namespace; run it as robot_N/coaty_bridge or set ~robot_name")
-    return BridgeConfig(robot_name=robot_name, **kwargs)
+    if choice.warning:
+        rospy.logwarn("%s: coaty_bridge: %s", robot_name, choice.warning)
+    try:
+        config = BridgeConfig(robot_name=robot_name, broker_url=choice.url, broker_url_source=choice.source,
+                              **kwargs)
+    except ValueError as err:
+        if "broker_url" in str(err).split("=")[0]:
+            raise ValueError("%s (from %s)" % (err, choice.source)) from None
+        raise
+    return config, choice
 
 
 def wait_for_param(name, timeout):
@@ -200,10 +218,10 @@ class BridgeNode:
         if self.from_fleet.get_num_connections() == 0:
             rospy.logwarn("%s: nobody subscribes from_fleet after %.1f s; connecting anyway",
                           self.config.robot_name, subscriber_wait)
-        self.client.start()
-        rospy.loginfo("%s: coaty_bridge agent %s, broker %s, namespace %s, objectType %s",
+        rospy.loginfo("%s: coaty_bridge agent %s, broker %s (from %s), namespace %s, objectType %s",
                       self.config.robot_name, self.client.identity_id, self.config.broker_url,
-                      self.config.namespace, self.config.object_type)
+                      self.config.broker_url_source, self.config.namespace, self.config.object_type)
+        self.client.start()
 
     def shutdown(self):
         self._timer.shutdown()
@@ -368,7 +386,7 @@ def main():
         package_logger.addHandler(handler)
         package_logger.setLevel(logging.INFO)
     try:
-        config = read_config()
+        config, _choice = read_config()
         footprint_config = FootprintConfig.from_params()
         subscriber_wait = rospy.get_param("~subscriber_wait", 10.0)
         if isinstance(subscriber_wait, bool) or not isinstance(subscriber_wait, (int, float)) \
