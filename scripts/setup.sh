@@ -7,7 +7,7 @@ PACKAGES=(
   # ROS 1 core from Debian's archive (ros_comm 1.15, Noetic level)
   ros-core-dev ros-base-dev catkin python3-catkin-pkg rosbash
   python3-rospy libroscpp-dev python3-rostest librostest-dev python3-rosbag
-  pluginlib-dev libtf2-ros-dev python3-tf2-ros liblaser-geometry-dev
+  pluginlib-dev libtf2-ros-dev python3-tf2-ros liblaser-geometry-dev libdiagnostic-updater-dev
   libnav-msgs-dev libmap-msgs-dev libmove-base-msgs-dev python3-actionlib
   # C++ core, bindings and tests
   build-essential cmake pybind11-dev libgtest-dev googletest

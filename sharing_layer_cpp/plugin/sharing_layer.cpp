@@ -60,6 +60,9 @@ void SharingLayer::onInitialize()
   fleet_params_ = config.fleet;
   inscribed_from_footprint_ = config.inscribed_from_footprint;
   source_names_ = config.source_names;
+  adopted_ = adopted;
+  private_namespace_ = private_nh.getNamespace();
+  map_topic_ = config.map_topic == "none" ? std::string() : config.map_topic;
   global_frame_ = layered_costmap_->getGlobalFrameID();
   warnAboutSetup(adopted, private_nh.getNamespace());
   wireTopics(config);
@@ -74,6 +77,7 @@ void SharingLayer::onInitialize()
            params_.clearing_margin, params_.trigger_memory, params_.trigger_radius, config.plan_topics.c_str(),
            params_.inscribed_radius, config.map_topic.c_str());
   rebuildCore();
+  startDiagnosticsAndReconfigure(private_nh);
 }
 
 void SharingLayer::warnAboutSetup(const std::vector<std::string>& adopted, const std::string& private_namespace)
@@ -264,7 +268,7 @@ void SharingLayer::onFootprintChanged()
   {
     return;
   }
-  std::lock_guard<std::mutex> lock(core_mutex_);
+  std::unique_lock<std::mutex> lock(core_mutex_);
   // costmap_2d sets the footprint more than once at start-up (padding), with radii that differ only in the
   // last bits: log a change a person would see.
   if (std::abs(inscribed - params_.inscribed_radius) > 1e-6)
@@ -276,6 +280,13 @@ void SharingLayer::onFootprintChanged()
   if (core_)
   {
     core_->setInscribedRadius(inscribed);
+  }
+  lock.unlock();  // reconfigure() takes the server's mutex, then core_mutex_
+  boost::recursive_mutex::scoped_lock reconfigure_lock(reconfigure_mutex_);
+  if (reconfigure_server_)
+  {
+    reconfigure_config_.inscribed_radius = inscribed;  // shown in the server, not a change of the user's
+    reconfigure_server_->updateConfig(reconfigure_config_);
   }
 }
 
@@ -340,6 +351,8 @@ void SharingLayer::checkPlanPublishers(const ros::TimerEvent&)
 void SharingLayer::planCallback(const nav_msgs::Path::ConstPtr& msg)
 {
   std::lock_guard<std::mutex> lock(core_mutex_);
+  ++plans_received_;
+  last_plan_ = ros::Time::now();
   if (!core_)
   {
     return;
@@ -366,119 +379,6 @@ void SharingLayer::planCallback(const nav_msgs::Path::ConstPtr& msg)
   core_->setPlan(poses);
 }
 
-void SharingLayer::mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg)
-{
-  if (msg->info.width == 0 || msg->info.height == 0 ||
-      msg->data.size() != static_cast<std::size_t>(msg->info.width) * msg->info.height ||
-      !(msg->info.resolution > 0.0f))
-  {
-    ROS_WARN("SharingLayer (%s): ignoring a map of %ux%u cells with %zu values at resolution %f",
-             params_.robot_name.c_str(), msg->info.width, msg->info.height, msg->data.size(), msg->info.resolution);
-    return;
-  }
-  std::lock_guard<std::mutex> lock(core_mutex_);
-  map_ = msg;
-  applyUnknownMap();
-}
-
-void SharingLayer::applyUnknownMap()
-{
-  if (!core_ || !map_)
-  {
-    return;
-  }
-  // Unknown (-1) cells of the a-priori map, looked up for every master cell through world coordinates, so a
-  // master of another size or origin (a static layer with a different map, rolling window off) still works.
-  const GridGeometry g = core_->geometry();
-  const nav_msgs::MapMetaData& info = map_->info;
-  std::vector<std::uint8_t> unknown(g.cellCount(), 0);
-  std::size_t count = 0;
-  for (unsigned int my = 0; my < g.size_y; ++my)
-  {
-    for (unsigned int mx = 0; mx < g.size_x; ++mx)
-    {
-      double wx = 0.0, wy = 0.0;
-      g.mapToWorld(mx, my, wx, wy);
-      const double fx = (wx - info.origin.position.x) / info.resolution;
-      const double fy = (wy - info.origin.position.y) / info.resolution;
-      if (fx < 0.0 || fy < 0.0 || fx >= info.width || fy >= info.height)
-      {
-        continue;  // outside the map: the static layer's business
-      }
-      const std::size_t index = static_cast<std::size_t>(fy) * info.width + static_cast<std::size_t>(fx);
-      if (map_->data[index] < 0)
-      {
-        unknown[g.getIndex(mx, my)] = 1;
-        ++count;
-      }
-    }
-  }
-  core_->setUnknownMap(unknown.data(), unknown.size());
-  ROS_INFO("SharingLayer (%s): %zu cells of the a-priori map are unknown and never shared",
-           params_.robot_name.c_str(), count);
-}
-
-void SharingLayer::fleetRobotsCallback(const sharing_msgs::RobotFootprintArray::ConstPtr& msg)
-{
-  std::lock_guard<std::mutex> lock(core_mutex_);
-  fleet_robots_ = msg;
-  applyFleetRobots();
-}
-
-void SharingLayer::applyFleetRobots()
-{
-  if (!core_ || !fleet_robots_)
-  {
-    return;
-  }
-  std::vector<FleetRobot> robots;
-  for (const sharing_msgs::RobotFootprint& item : fleet_robots_->robots)
-  {
-    if (item.robot == params_.robot_name)
-    {
-      continue;  // this robot's own footprint is the footprint clearing's business
-    }
-    FleetRobot robot;
-    robot.name = item.robot;
-    robot.stamp = item.header.stamp.isZero() ? ros::Time::now().toSec() : item.header.stamp.toSec();
-    double tx = 0.0, ty = 0.0, yaw = 0.0;
-    std::string frame = item.header.frame_id;
-    if (!frame.empty() && frame[0] == '/')
-    {
-      frame.erase(0, 1);
-    }
-    try
-    {
-      if (!frame.empty() && frame != global_frame_)
-      {
-        const geometry_msgs::TransformStamped t = tf_->lookupTransform(global_frame_, frame, ros::Time(0));
-        const geometry_msgs::Quaternion& q = t.transform.rotation;
-        tx = t.transform.translation.x;
-        ty = t.transform.translation.y;
-        yaw = std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z));
-      }
-      const double c = std::cos(yaw), s = std::sin(yaw);
-      for (const geometry_msgs::Point32& p : item.footprint.points)
-      {
-        robot.footprint.emplace_back(tx + c * p.x - s * p.y, ty + s * p.x + c * p.y);
-      }
-      FleetRobots::check(robot);
-      robots.push_back(std::move(robot));
-    }
-    catch (const tf2::TransformException& e)
-    {
-      ROS_WARN_THROTTLE(5.0, "SharingLayer (%s): ignoring fleet robot %s: cannot transform its footprint from %s to "
-                             "%s: %s",
-                        params_.robot_name.c_str(), item.robot.c_str(), frame.c_str(), global_frame_.c_str(), e.what());
-    }
-    catch (const std::invalid_argument& e)
-    {
-      ROS_WARN_THROTTLE(5.0, "SharingLayer (%s): ignoring fleet robot: %s", params_.robot_name.c_str(), e.what());
-    }
-  }
-  core_->fleetRobots().replaceAll(robots);  // all checked: cannot throw
-}
-
 void SharingLayer::handleTrigger(const TriggerReport& report, double now)
 {
   if (report.log)
@@ -495,53 +395,7 @@ void SharingLayer::handleTrigger(const TriggerReport& report, double now)
     value.geometry = core_->geometry();
     value.stamp = now;
     proposals_pub_.publish(toMessage(value, global_frame_));
-  }
-}
-
-void SharingLayer::sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& msg)
-{
-  std::lock_guard<std::mutex> lock(core_mutex_);
-  if (!core_)
-  {
-    ROS_WARN_THROTTLE(5.0, "SharingLayer (%s): obstacle %s from %s arrived before the map; dropped",
-                      params_.robot_name.c_str(), msg->uuid.c_str(), msg->source.c_str());
-    return;
-  }
-  try
-  {
-    ObstacleUpdate update = fromMessage(*msg);
-    if (!update.geometry.sameAs(core_->geometry()))
-    {
-      // Sent on another grid (the sender's map differs in size or origin, or this is a rolling window): the
-      // cells go where they are in the world.
-      std::size_t dropped = 0;
-      update = reprojectUpdate(update, core_->geometry(), &dropped);
-      if (dropped > 0)
-      {
-        ROS_DEBUG("SharingLayer (%s): obstacle %s from %s: %zu cell(s) outside this layer's grid dropped",
-                  params_.robot_name.c_str(), msg->uuid.c_str(), msg->source.c_str(), dropped);
-      }
-    }
-    const ApplyResult result = core_->applyShared(update, ros::Time::now().toSec());
-    if (!result.ok)
-    {
-      ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): ignoring shared obstacle: %s", params_.robot_name.c_str(),
-                        result.error.c_str());
-    }
-  }
-  catch (const std::invalid_argument& e)
-  {
-    ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): ignoring shared obstacle %s from %s: %s", params_.robot_name.c_str(),
-                      msg->uuid.c_str(), msg->source.c_str(), e.what());
-  }
-}
-
-void SharingLayer::expiredCallback(const std_msgs::String::ConstPtr& msg)
-{
-  std::lock_guard<std::mutex> lock(core_mutex_);
-  if (core_ && !core_->expire(msg->data))
-  {
-    ROS_DEBUG("SharingLayer (%s): expired obstacle %s was not known", params_.robot_name.c_str(), msg->data.c_str());
+    ++proposals_published_;
   }
 }
 
@@ -561,6 +415,8 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
   current_ = sourceObservations(observations);
 
   std::lock_guard<std::mutex> lock(core_mutex_);
+  sources_current_ = current_;
+  applyPendingReconfigure();  // dynamic_reconfigure's accepted changes, from this cycle on
   if (!core_)
   {
     return;
@@ -630,6 +486,7 @@ void SharingLayer::processObservation(const SourceObservation& source_observatio
     for (const ObstacleUpdate& update : outcome.updates)
     {
       updates_pub_.publish(toMessage(update, global_frame_));
+      ++updates_published_;
     }
   }
   if (!static_pending_ && !rolling_window_)  // without the a-priori map every wall looks new
@@ -724,6 +581,7 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
     // The layers before us (the static layer) have drawn the whole map: that is the a-priori map.
     core_->setStaticMap(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY());
     static_pending_ = false;
+    static_seen_ = true;
     // Scans that came between the new core and this update (a map that arrives or changes size while
     // the sensors run) made wall cells shareable, and a wall seen on every scan never leaves that set.
     // Clear the obstacle grid and the shareable cells (shared obstacles stay) and replay those scans
@@ -737,6 +595,7 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
         for (const ObstacleUpdate& update : core_->processScan(scan.first, now, scan.second).updates)
         {
           updates_pub_.publish(toMessage(update, global_frame_));
+          ++updates_published_;
         }
       }
       pre_static_scans_.clear();

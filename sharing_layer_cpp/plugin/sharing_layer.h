@@ -8,7 +8,10 @@
 #include <vector>
 
 #include <actionlib_msgs/GoalStatusArray.h>
+#include <boost/thread/recursive_mutex.hpp>
 #include <costmap_2d/obstacle_layer.h>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <nav_msgs/OccupancyGrid.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
@@ -17,6 +20,8 @@
 #include <std_msgs/Empty.h>
 #include <std_msgs/String.h>
 #include <topic_tools/shape_shifter.h>
+
+#include <sharing_layer_cpp/SharingLayerConfig.h>
 
 #include "sharing_layer/sharing_core.h"
 #include "layer_config.h"
@@ -36,6 +41,12 @@ namespace sharing_layer
  * fleet_robots), whose footprints plus ~robot_exclusion_margin are never shared;
  * publishes obstacle_proposals and obstacle_updates (sharing_msgs/SharedObstacle). Every trigger is logged
  * once at INFO with its source and what it proposed, or why nothing.
+ *
+ * /diagnostics (1 Hz): one status "sharing_layer: <robot_name> (<layer name>)" with the observation sources, the plan
+ * trigger, the a-priori map, and counts of proposals and updates published, shared obstacles held and fleet messages
+ * rejected; the set-up's warnings are there with their reason. dynamic_reconfigure: the sharing parameters
+ * (SharingLayer.cfg) in <layer name>/sharing (the layer's own namespace has ObstacleLayer's server), checked with
+ * LayerParams::validate() and applied at the next updateBounds.
  */
 class SharingLayer : public costmap_2d::ObstacleLayer
 {
@@ -57,6 +68,10 @@ public:
   /// @brief Whether the core clears and marks this layer's own costmap_ (one obstacle grid; false only while the
   /// two sizes differ, when the core keeps its own and the window is copied in updateCosts).
   bool sharesGridWithCore();
+  /// @brief The sharing parameters in use: the core's (its last cycle's), or the layer's before the core exists.
+  LayerParams sharingParams();
+  /// @brief robot_exclusion_margin and robot_timeout in use.
+  FleetRobotParams fleetRobotParams();
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
@@ -91,6 +106,17 @@ private:
   void applyUnknownMap();
   void rebuildCore();
   GridGeometry masterGeometry() const;
+  /// @brief The /diagnostics status (diagnostic_updater task, 1 Hz timer): sources, plan trigger, map, counts.
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /// @brief The plan trigger's and the map's part of diagnose; core_mutex_ held.
+  void diagnosePlanAndMap(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /// @brief Starts the diagnostics and the dynamic_reconfigure server (onInitialize, after the parameters).
+  void startDiagnosticsAndReconfigure(const ros::NodeHandle& private_nh);
+  /// @brief dynamic_reconfigure's callback: the changed fields onto the parameters in use, validated; a bad value is
+  /// refused (logged, `config` set back to the previous one). Accepted ones wait in pending_ for the next cycle.
+  void reconfigure(sharing_layer_cpp::SharingLayerConfig& config, uint32_t level);
+  /// @brief Applies the pending reconfiguration, if any; core_mutex_ held (updateBounds).
+  void applyPendingReconfigure();
 
   LayerParams params_;
   std::unique_ptr<SharingCore> core_;
@@ -138,6 +164,35 @@ private:
   bool goal_active_ = true;  ///< until move_base's status says otherwise (none heard: follow every plan)
   ros::Subscriber map_sub_;
   ros::Subscriber fleet_robots_sub_;
+
+  // What /diagnostics reports (core_mutex_).
+  std::vector<std::string> adopted_;        ///< parameters taken from the costmap's namespace
+  std::string private_namespace_;           ///< the layer's parameter namespace, for the reasons
+  std::string map_topic_;                   ///< "" or "none": no a-priori map topic
+  bool map_seen_ = false;                   ///< a valid map arrived on map_topic_
+  bool static_seen_ = false;                ///< the static layer's map was read at least once
+  bool sources_current_ = true;             ///< ObstacleLayer's current_ at the last cycle
+  unsigned long plans_received_ = 0;
+  ros::Time last_plan_;
+  unsigned long proposals_published_ = 0;
+  unsigned long updates_published_ = 0;
+  unsigned long fleet_rejected_ = 0;        ///< shared obstacles ignored (before the map, bad, refused by the core)
+  std::string last_rejection_;
+  std::string last_refusal_;                ///< the last refused reconfiguration, with its reason
+  // dynamic_reconfigure: accepted values wait here for the next updateBounds (core_mutex_).
+  struct PendingReconfigure
+  {
+    LayerParams params;
+    FleetRobotParams fleet;
+    bool inscribed_set = false;  ///< inscribed_radius set: stop following the footprint
+  };
+  std::unique_ptr<PendingReconfigure> pending_;
+  // Declared last: destroyed first, so that no callback of theirs runs on a half-destroyed layer.
+  boost::recursive_mutex reconfigure_mutex_;           ///< the server's; guards reconfigure_config_ too
+  sharing_layer_cpp::SharingLayerConfig reconfigure_config_;  ///< the last accepted configuration
+  std::unique_ptr<dynamic_reconfigure::Server<sharing_layer_cpp::SharingLayerConfig>> reconfigure_server_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  ros::Timer diagnostics_timer_;
 };
 
 }  // namespace sharing_layer

@@ -84,6 +84,19 @@ void SharingCore::setInscribedRadius(double radius_m)
   params_ = changed;
 }
 
+void SharingCore::setParams(const LayerParams& params)
+{
+  params.validate();
+  triggers_.setDebounce(params.trigger_debounce);  // validated: cannot throw
+  const bool tolerance_changed = params.static_tolerance != params_.static_tolerance;
+  params_ = params;
+  if (tolerance_changed)
+  {
+    statics_.setTolerance(geometry(), params_.static_tolerance);
+    observed_.dropStatic(statics_, flags_);
+  }
+}
+
 std::vector<std::uint32_t> SharingCore::rememberedCells() const
 {
   return observed_.rememberedSorted();

@@ -39,6 +39,15 @@ void StaticMask::setUnknown(const GridGeometry& geometry, const std::uint8_t* un
   rebuild(geometry, tolerance);
 }
 
+void StaticMask::setTolerance(const GridGeometry& geometry, int tolerance)
+{
+  if (tolerance < 0)
+  {
+    throw std::invalid_argument("static_tolerance must be >= 0 cells, got " + std::to_string(tolerance));
+  }
+  rebuild(geometry, tolerance);
+}
+
 void StaticMask::clear()
 {
   walls_.release();

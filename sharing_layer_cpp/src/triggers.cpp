@@ -110,6 +110,11 @@ TriggerDebounce::TriggerDebounce(double window_s) : window_(window_s)
   }
 }
 
+void TriggerDebounce::setWindow(double window_s)
+{
+  window_ = TriggerDebounce(window_s).window_;
+}
+
 bool TriggerDebounce::signal(double now_s)
 {
   if (!std::isfinite(now_s))

@@ -108,6 +108,15 @@ public:
   /// negative or not finite
   void setInscribedRadius(double radius_m);
 
+  /**
+   * @brief New parameters on a running core (dynamic_reconfigure): validated first (@throws std::invalid_argument
+   * naming the bad one, and changes nothing), then applied from the next call on. The grids, the shared obstacles,
+   * the trigger memory, the plan and the fleet robots stay; a new static_tolerance rebuilds the static mask from the
+   * maps already given (shareable cells it now covers are dropped); a new trigger_debounce applies from the next
+   * signal. static_occupied_cost applies from the next setStaticMap.
+   */
+  void setParams(const LayerParams& params);
+
   /// @return remembered cells (trigger memory), sorted
   std::vector<std::uint32_t> rememberedCells() const;
 

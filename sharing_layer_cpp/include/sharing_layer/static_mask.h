@@ -26,6 +26,9 @@ public:
   /// @brief Where the map is unknown (non-zero); nullptr / 0 cells forgets them.
   /// @throws std::invalid_argument on a size mismatch, before anything changes
   void setUnknown(const GridGeometry& geometry, const std::uint8_t* unknown, std::size_t cell_count, int tolerance);
+  /// @brief Rebuilds the filter from the sources given so far with another static_tolerance (nothing to do
+  /// without any). @throws std::invalid_argument when negative, before anything changes
+  void setTolerance(const GridGeometry& geometry, int tolerance);
   /// @brief Forgets both sources (a new grid).
   void clear();
 

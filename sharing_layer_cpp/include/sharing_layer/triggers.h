@@ -78,6 +78,9 @@ public:
   /// @brief Registers a signal at now_s; @return true when it starts a new burst
   bool signal(double now_s);
   double window() const { return window_; }
+  /// @brief A new window from the next signal on (the current burst's last signal is kept);
+  /// @throws std::invalid_argument when negative or not finite, and changes nothing
+  void setWindow(double window_s);
   /// @return signals in the current burst, the last one included (1 right after a burst started)
   unsigned long burstSignals() const { return burst_signals_; }
 
@@ -122,6 +125,15 @@ public:
 
   /// @brief Keeps the finite poses; @return whether any is left
   bool setPlan(const std::vector<std::pair<double, double>>& poses);
+  /// @brief trigger_debounce for both windows, from the next signal on; @throws std::invalid_argument when
+  /// negative or not finite, and changes nothing
+  void setDebounce(double debounce_s)
+  {
+    TriggerDebounce check(debounce_s);
+    (void)check;
+    stuck_.setWindow(debounce_s);
+    plan_trigger_.setWindow(debounce_s);
+  }
   const std::vector<std::pair<double, double>>& plan() const { return plan_; }
 
 private:
