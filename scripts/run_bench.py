@@ -36,6 +36,10 @@ BENCHMARKS = {
             "navigation host: C++ A* and inflation vs a Python/SciPy baseline"),
     "replay": ([sys.executable, os.path.join(ROOT, "sharing_replay", "scripts", "bench_replay")],
                "offline bag replay: real-time factor on a 10-minute two-robot bag"),
+    "lifecycle": ([sys.executable, os.path.join(ROOT, "tests", "scripts", "bench_lifecycle"),
+                   "--table", os.path.join(OUT, "lifecycle.md")],
+                  "shared obstacle lifecycle: followers sent 10 s .. 15 min after a block was found, and after it "
+                  "was removed (two-corridor world, sharing on vs off)"),
     "fleet": ([sys.executable, os.path.join(ROOT, "tests", "scripts", "bench_fleet"),
                "--chart", os.path.join(OUT, "fleet.png")],
               "fleet benefit: N robots through the facility, sharing on vs off (chart in out/bench/fleet.png)"),

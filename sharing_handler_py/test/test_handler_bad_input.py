@@ -169,4 +169,4 @@ def test_bad_parameters_fail_naming_parameter_and_value(changes, name):
 def test_parameter_defaults():
     p = HandlerParams(robot_name="robot_0")
     assert (p.obstacle_duration, p.expiry_rate, p.snapshot_file, p.max_cells_per_message, p.map_topic,
-            p.merge_distance) == (60.0, 1.0, "", 100000, "/map", 0.5)
+            p.merge_distance) == (1200.0, 1.0, "", 100000, "/map", 0.5)

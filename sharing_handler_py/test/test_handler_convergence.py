@@ -100,7 +100,8 @@ def test_observers_converge_whatever_the_order_and_duplicates(msgs, data):
         assert state(r.handler) == reference
     # the merged obstacles are the oracle's: survivor = smallest uuid, union rectangle, cells
     groups = merged_groups(msgs)
-    expected = sorted((min(g), box, expected_cells(msgs, g)) for g, box in groups.items())
+    # an obstacle whose every cell was seen free is gone from the list (issue 26), on every observer alike
+    expected = sorted((min(g), box, expected_cells(msgs, g)) for g, box in groups.items() if expected_cells(msgs, g))
     assert [(h.uuid, h.rectangle, h.cells) for h in observers[0].handler.obstacles()] == expected
     for r in observers:
         for g in groups:
@@ -128,8 +129,9 @@ def test_the_layer_is_told_the_same_cells_as_the_handler_holds(msgs, data):
             for c in item.cleared:
                 if c not in cells or (item.version, item.source) >= cells[c][0]:
                     cells[c] = ((item.version, item.source), False)
-    assert sorted((u, tuple(sorted(c for c, (_, p) in cells.items() if p))) for u, cells in layer.items()) \
-        == [(h.uuid, h.cells) for h in r.handler.obstacles()]
+    # (the layer may still hold an obstacle it was told of with no present cell: it draws nothing)
+    told = [(u, tuple(sorted(c for c, (_, p) in cells.items() if p))) for u, cells in layer.items()]
+    assert sorted((u, c) for u, c in told if c) == [(h.uuid, h.cells) for h in r.handler.obstacles()]
 
 
 @EXAMPLES
@@ -165,7 +167,7 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
                                             rectangle=data.draw(st.sampled_from(RECTANGLES))))
             if shared is not None and shared.version == 1:
                 authorised.add(shared.uuid)
-        elif kind == "update" and len(h):
+        elif kind == "update" and h.obstacles():
             held = data.draw(st.sampled_from(h.obstacles()))
             # the layer usually sends max+1; a stale version exercises the re-stamp guard
             version = held.version + data.draw(st.sampled_from([1, 1, 0, -1]))
@@ -203,7 +205,13 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
         for r in robots[1:]:
             assert state(r.handler) == reference
         for r in robots:
-            assert {r.handler.resolve(u) for u in authorised} == {u for u, *_ in reference}
+            # every authorised obstacle is held (or merged into one that is); it is listed unless every
+            # cell of it was seen free (issue 26), and then it is held with no present cell
+            held = {r.handler.resolve(u) for u in authorised}
+            assert all(u in r.handler for u in held)
+            listed = {u for u, *_ in reference}
+            assert listed <= held
+            assert all(r.handler.get(u).cells == () for u in held - listed)
 
 
 @EXAMPLES

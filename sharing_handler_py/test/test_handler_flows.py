@@ -391,3 +391,38 @@ def test_after_a_restart_own_obstacles_are_accepted_back_from_peers_but_echoes_o
     assert r.handler.get(U("mine")).cells == (3,)
     assert r.handler.on_external(mine.replace(version=3, marked=(4,))) is False  # held: an echo
     assert r.handler.counters["dropped_own_source"] == 1
+
+
+def test_an_update_that_clears_the_last_cell_removes_the_obstacle_on_the_sender_and_every_receiver():
+    """Issue 26: evidence ends an obstacle at once, not its lease; the layer gets the clearing update
+    (its copy has no cell left to draw) and nobody lists the obstacle any more."""
+    a, b = Recorder("robot_0", duration=1200), Recorder("robot_1", duration=1200)
+    shared = a.handler.on_proposal(proposal(cells=(10, 11, 12), rectangle=rect(0, 0, 1, 1)))
+    b.handler.on_external(shared)
+    part = a.handler.on_internal_update(update(shared.uuid, cleared=(10, 11), version=2, source="robot_0",
+                                               rectangle=rect(0, 0, 1, 1)))
+    b.handler.on_external(part)
+    assert [h.cells for h in a.handler.obstacles()] == [h.cells for h in b.handler.obstacles()] == [(12,)]
+    last = a.handler.on_internal_update(update(shared.uuid, cleared=(12,), version=3, source="robot_0",
+                                               rectangle=rect(0, 0, 1, 1)))
+    assert last is not None and last.cleared == (12,)      # it still goes out, so the fleet clears it too
+    b.handler.on_external(last)
+    # the receiver's layer gets the clearing update (the sender's layer made it)
+    assert b.layer[-1].uuid == shared.uuid and b.layer[-1].cleared == (12,)
+    for r in (a, b):
+        assert r.handler.obstacles() == []
+        assert r.handler.counters["cleared_by_evidence"] == 1
+        assert r.handler.get(shared.uuid).cells == ()       # its stamps stay until the lease ends
+        assert r.expired == []                              # no expiry: nothing else to tell the layer
+
+
+def test_a_newer_mark_shows_a_cleared_obstacle_again_and_an_older_one_does_not():
+    r = Recorder(duration=1200)
+    r.handler.on_external(update(U("a"), marked=(1, 2), version=1, source="robot_1"))
+    r.handler.on_external(update(U("a"), cleared=(1, 2), version=3, source="robot_2"))
+    assert r.handler.obstacles() == []
+    r.handler.on_external(update(U("a"), marked=(2,), version=2, source="robot_1"))   # older: stays cleared
+    assert r.handler.obstacles() == []
+    r.handler.on_external(update(U("a"), marked=(2,), version=4, source="robot_1"))   # the block is back
+    assert [(h.uuid, h.cells) for h in r.handler.obstacles()] == [(U("a"), (2,))]
+    assert r.handler.counters["cleared_by_evidence"] == 1

@@ -212,9 +212,9 @@ def test_non_defaults_lists_only_what_differs():
 
 def test_bench_defaults_are_the_launch_files():
     bf = load_bench_fleet()
-    assert float(bf.launch_defaults()["obstacle_duration"]) == 60.0
+    assert float(bf.launch_defaults()["obstacle_duration"]) == 1200.0
     args = bf.make_parser().parse_args([])
-    assert args.obstacle_duration == 60 and len(args.seed) >= 3
+    assert args.obstacle_duration == 1200 and len(args.seed) >= 3
     assert bf.non_defaults(args)[-1].startswith("bench: ")            # only the bench's own settings line
     lines = bf.non_defaults()
     assert not any("obstacle_duration" in line or "stuck_feedback" in line for line in lines)

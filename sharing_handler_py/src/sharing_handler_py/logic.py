@@ -28,6 +28,15 @@ that made it gives it a full obstacle_duration again. A held obstacle expires at
 arrival + deadline of any observation of it (the greatest lease wins, whatever the order).
 Messages that only clear cells carry the lifetime left, so they never extend it.
 
+Evidence ends an obstacle (issue 26): when an update (this robot's or a peer's) leaves an
+obstacle with no present cell, every cell of it was seen free, and the obstacle leaves the list,
+the layer and the snapshot at once, as on expiry (no message sent). Every robot that applies the
+clearing updates ends with no present cell too (the stamp rule), so it goes fleet-wide within one
+delivery. The entry itself (its stamps) stays until its lease ends, so that the outcome does not
+depend on the order: a later mark (a newer stamp: the block is back) shows it again everywhere,
+and an older one stays cleared. The lease (obstacle_duration after the last observation) only
+bounds what nobody checks.
+
 Bounded authority (issue 27, authority.py): no peer can make an obstacle larger, longer-lived
 or newer than this handler's own caps. A deadline is cut to obstacle_duration on arrival (so a
 renewal reaches at most arrival + obstacle_duration), a message that does not mark cells can
@@ -79,6 +88,7 @@ DROP_REASONS = (
 #: Counters besides the drops.
 EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_out",
                   "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals",
+                  "cleared_by_evidence",  # deleted at once: an update left no present cell (issue 26)
                   "capped_deadlines",  # a peer's deadline cut to obstacle_duration
                   "merges_refused")    # two obstacles left apart: their union exceeds the caps
 
@@ -325,12 +335,13 @@ class SharingHandler:
         return uuid
 
     def obstacles(self):
-        """The held obstacles, sorted by uuid."""
+        """The held obstacles with a present cell, sorted by uuid (one whose every cell was seen free is
+        gone from the fleet's view, though its stamps are kept until its lease ends)."""
         now = self._clock()
-        return [self._held(self._entries[u], now) for u in sorted(self._entries)]
+        return [self._held(self._entries[u], now) for u in sorted(self._entries) if self._entries[u].present]
 
     def get(self, uuid):
-        """The held obstacle `uuid`, or None."""
+        """The held obstacle `uuid` (also one whose every cell was seen free, with no cell), or None."""
         entry = self._entries.get(uuid)
         return None if entry is None else self._held(entry, self._clock())
 
@@ -447,8 +458,10 @@ class SharingHandler:
         self._to_fleet(obstacle)
         self._counters["updates_out"] += 1
         rectangle = entry.rectangle
+        shown = bool(entry.present)
         if entry.apply(obstacle):
             self._on_change()
+        self._note_shown(entry, shown, obstacle)
         if entry.rectangle is not rectangle:
             self._merge_around(obstacle.uuid)
         return obstacle
@@ -482,6 +495,7 @@ class SharingHandler:
                       self.robot_name, obstacle.uuid, obstacle.version, obstacle.source,
                       obstacle.deadline, self._policy.max_lifetime)
             obstacle = obstacle.replace(deadline=self._policy.cap_deadline(obstacle.deadline))
+        shown = entry is not None and bool(entry.present)
         if entry is None:
             entry = _Entry(obstacle, self._clock())
             self._entries[obstacle.uuid] = entry
@@ -499,6 +513,7 @@ class SharingHandler:
         self._to_layer(obstacle)
         if changed:
             self._on_change()
+        self._note_shown(entry, shown, obstacle)
         if grown:
             # Only an added obstacle or a grown rectangle can come within merge_distance of
             # another (rectangles never shrink), so most updates need no search at all.
@@ -555,16 +570,7 @@ class SharingHandler:
         now = self._clock()
         gone = sorted(u for u, e in self._entries.items() if now >= e.expires_at)
         for uuid in gone:
-            entry = self._entries.pop(uuid)
-            self._nearby.remove(uuid)
-            # Remember the uuid (and those it absorbed) at least obstacle_duration more, so a
-            # late message cannot resurrect the obstacle on this robot only; with stamps checked,
-            # until no message for it can pass the stamp check (a replay, issue 27).
-            until = now + max(self._policy.tombstone_time, entry.deadline)
-            self._tombstones[uuid] = until
-            for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
-                del self._aliases[alias]
-                self._tombstones[alias] = until
+            entry = self._forget(uuid)
             self._counters["expired"] += 1
             _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
                       entry.expires_at - entry.arrival, entry.arrival)
@@ -583,6 +589,35 @@ class SharingHandler:
                      source, (uuid or "")[:80], error)
 
     # ----------------------------------------------------------------- internals
+
+    def _forget(self, uuid):
+        """Drops a held obstacle and returns its entry. The uuid (and those it absorbed) is remembered
+        at least obstacle_duration more, so that a late message cannot resurrect the obstacle on this
+        robot only; with stamps checked, until no message for it can pass the stamp check (a replay,
+        issue 27)."""
+        now = self._clock()
+        entry = self._entries.pop(uuid)
+        self._nearby.remove(uuid)
+        until = now + max(self._policy.tombstone_time, entry.deadline)
+        self._tombstones[uuid] = until
+        for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
+            del self._aliases[alias]
+            self._tombstones[alias] = until
+        return entry
+
+    def _note_shown(self, entry, shown, obstacle):
+        """After `obstacle` was applied to `entry`, which had present cells when `shown`: an obstacle left
+        without a present cell leaves the list (every cell seen free, issue 26). The layer applied the same
+        update and draws none of its cells either; it keeps monitoring the rectangle, so a block that comes
+        back is marked again under the same uuid, which shows it again here."""
+        if shown and not entry.present:
+            self._counters["cleared_by_evidence"] += 1
+            _log.info("%s: obstacle %s: every cell seen free (last cleared by %s, v%d, %.1f s before its lease "
+                      "ended): removed from the list", self.robot_name, entry.uuid, obstacle.source,
+                      obstacle.version, entry.expires_at - self._clock())
+        elif not shown and entry.present and len(entry.stamps) > len(entry.present):
+            _log.info("%s: obstacle %s seen occupied again by %s (v%d): shown again", self.robot_name,
+                      entry.uuid, obstacle.source, obstacle.version)
 
     def _authorise(self, obstacle, deadline):
         # stamp = when the share was made: the layer's detection time, or now (manual adds).

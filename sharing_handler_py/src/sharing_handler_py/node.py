@@ -83,7 +83,7 @@ def read_params():
     default_name = rospy.get_namespace().strip("/").replace("/", "_")
     return HandlerParams(
         robot_name=rospy.get_param("~robot_name", default_name),
-        obstacle_duration=rospy.get_param("~obstacle_duration", 60.0),
+        obstacle_duration=rospy.get_param("~obstacle_duration", 1200.0),
         expiry_rate=rospy.get_param("~expiry_rate", 1.0),
         snapshot_file=rospy.get_param("~snapshot_file", ""),
         max_cells_per_message=rospy.get_param("~max_cells_per_message", 100000),

@@ -261,7 +261,7 @@ class HandlerParams:
     """The node's parameters, checked at start-up. Field names are the private parameter names."""
 
     robot_name: str
-    obstacle_duration: float = 60.0    # s, deadline given to authorised obstacles
+    obstacle_duration: float = 1200.0  # s, deadline given to authorised obstacles (the lease; README, "Lifecycle")
     expiry_rate: float = 1.0           # Hz, expiry check, diagnostics and snapshot
     snapshot_file: str = ""            # YAML snapshot path; "" = off
     max_cells_per_message: int = 100000

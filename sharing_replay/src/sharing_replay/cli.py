@@ -71,7 +71,7 @@ def build_parser():
     g.add_argument("--static-tolerance", type=int)
     g.add_argument("--trigger-debounce", type=float)
     g.add_argument("--proposal-strategy")
-    g.add_argument("--obstacle-duration", type=float, default=60.0, help="handler deadline, s (default 60)")
+    g.add_argument("--obstacle-duration", type=float, default=1200.0, help="handler deadline, s (default 1200, the handler's)")
     g.add_argument("--expiry-rate", type=float, default=1.0, help="handler expiry checks per second (default 1)")
     g.add_argument("--max-cells-per-message", type=int, default=100000)
     g = p.add_argument_group("tf")

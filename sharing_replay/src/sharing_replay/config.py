@@ -52,7 +52,7 @@ class ReplaySettings:
     tf_max_gap: float = 1.0
     tf_tolerance: float = 0.2
     tf_wait: float = 1.0
-    obstacle_duration: float = 60.0
+    obstacle_duration: float = 1200.0
     expiry_rate: float = 1.0
     max_cells_per_message: int = 100000
     wall_distance: int = 3

@@ -320,7 +320,7 @@ def main(argv=None):
             print("bench: broker byte counters: %s" % err)
         counters.close()
     # obstacles shared, distinct after merging, and which of them were robots or walls
-    lifetime = float(rospy.get_param("/robot_0/sharing_handler/obstacle_duration", 60.0))
+    lifetime = float(rospy.get_param("/robot_0/sharing_handler/obstacle_duration", 1200.0))
     merge_distance = float(rospy.get_param("/robot_0/sharing_handler/merge_distance", 0.5))
     groups = obstacle_groups([(t, m.uuid, tuple(m.rectangle_shape)) for _n, t, m in to_fleet],
                              merge_distance, lifetime)

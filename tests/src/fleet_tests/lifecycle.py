@@ -1,0 +1,172 @@
+"""One run of the lifecycle bench (issue 26): python3 -m fleet_tests.lifecycle --delay S --out FILE
+[--remove-after R], against fleet.launch layout:=corridors with 2 robots on its own master
+(tests/scripts/bench_lifecycle starts it).
+
+robot_0 (the leader) is sent to goal_0 straight through the short corridor, which block_short
+closes. The reference moment is when it found the block: its first share with sharing on, and with
+sharing off (nothing is shared) the moment its ground-truth pose first came within obstacle_range
+of the block, which is when the layer marks it. robot_1 (the follower) is sent to goal_1 `delay`
+simulated s later.
+
+Arrival-interval mode (no --remove-after): did the follower avoid the block that is still there
+(never crossed the short corridor's mouth), did it rediscover it (share cells on it), its time to
+goal, and whether its handler still held the leader's obstacle when it was sent.
+
+Block-removed mode (--remove-after R): the block is taken away R s after the reference moment,
+while nobody is near it. Then the follower is a "stale detour" when it is sent while the obstacle is
+still held and takes the long corridor; the run also reports, once a robot's sensors cover the
+place (the follower driving by, or nobody), when that robot's handler deleted the obstacle and when
+every robot's costmap was free there (issue 26: within 1 s of the first clearing).
+
+Writes FILE (JSON). Pure helpers: tests/test/test_lifecycle_metrics.py."""
+import argparse
+import json
+import math
+import sys
+
+
+def found_block_at(track, block, reach):
+    """Sim time of the first track point (t, x, y) within reach (m) of the block's rectangle, or None."""
+    from fleet_tests.ground_truth import distance_to_block
+    for t, x, y in track:
+        if distance_to_block(x, y, block) <= reach:
+            return t
+    return None
+
+
+def costmap_free_at(grid, cells):
+    """Whether none of the world points `cells` is lethal (100) in an OccupancyGrid costmap (None: no costmap)."""
+    if grid is None:
+        return None
+    res, ox, oy, w = grid.info.resolution, grid.info.origin.position.x, grid.info.origin.position.y, grid.info.width
+    for x, y in cells:
+        ix, iy = int((x - ox) / res), int((y - oy) / res)
+        if 0 <= ix < w and 0 <= iy < grid.info.height and grid.data[iy * w + ix] == 100:
+            return False
+    return True
+
+
+def check_the_place(fleet, robot, uuid, timeout):
+    """Sends robot to look_down, where its beams cover the removed block's place, and waits until no robot
+    holds the obstacle any more. {"first_clear": sim time of robot's first update clearing cells of it,
+    "deleted": {robot: sim time its handler deleted it}, "spread_s": last deletion - first clear,
+    "costmaps_free": {robot: whether its costmap is free at the obstacle's cells 1 s after the last deletion}}"""
+    import rospy
+    from fleet_tests.scenario import ScenarioError, cell_centre
+    sent = robot.send("look_down")
+    cells = [cell_centre(m, i) for r in fleet.robots for _t, m in r.to_fleet if m.uuid == uuid for i in m.marked_indexes]
+    try:
+        fleet.wait_until(lambda: all(uuid not in r.obstacles() for r in fleet.robots), timeout, "the obstacle's end")
+    except ScenarioError as err:
+        print("lifecycle: %s" % err)
+    robot.wait(max(1.0, sent + timeout - rospy.get_time()))
+    with fleet.lock:
+        clears = [t for t, m in robot.to_fleet if m.uuid == uuid and m.cleared_indexes and t >= sent]
+        deleted = {r.name: next((t for t, u in r.expired if u == uuid and t >= sent), None) for r in fleet.robots}
+    done = [t for t in deleted.values() if t is not None]
+    if done:
+        fleet.wait_until(lambda: rospy.get_time() >= max(done) + 1.0, 10.0, "1 s after the deletion")
+    return {"first_clear": clears[0] if clears else None, "deleted": deleted,
+            "spread_s": (max(done) - clears[0]) if clears and len(done) == len(deleted) else None,
+            "costmaps_free": {r.name: costmap_free_at(r.costmap, cells) for r in fleet.robots}}
+
+
+def main(argv=None):
+    import rospy
+    from fleet_tests.bench import crossed_mouth
+    from fleet_tests.ground_truth import on_block, run_figures
+    from fleet_tests.scenario import Fleet, ScenarioError, cell_centre, load_facility, wait_for_sim_time
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--delay", type=float, required=True, help="simulated s from the leader finding the block "
+                        "to the follower's dispatch")
+    parser.add_argument("--remove-after", type=float, default=None,
+                        help="take the block away this many simulated s after the leader found it")
+    parser.add_argument("--goal-timeout", type=float, default=400.0)
+    parser.add_argument("--out", required=True)
+    args = parser.parse_args(rospy.myargv(argv or sys.argv)[1:])
+    wait_for_sim_time()
+    rospy.init_node("bench_lifecycle_run")
+    try:
+        fleet = Fleet(2, facility=load_facility(rospy.get_param("/fleet/goals", None)))
+        fleet.wait_ready(180.0)
+    except ScenarioError as err:
+        print("lifecycle: %s" % err)
+        return 1
+    sharing = bool(rospy.get_param("/robot_0/move_base/sharing_enabled", True))
+    leader, follower = fleet.robots
+    block = fleet.facility["blocks"]["block_short"]
+    short = fleet.corridor("short")
+    reach = float(rospy.get_param("/robot_0/move_base/global_costmap/obstacle_range", 2.5))
+    leader_sent = leader.send("goal_0")
+
+    def found():
+        if sharing:
+            shares = leader.shares()
+            return shares[0][0] if shares else None
+        with fleet.lock:
+            return found_block_at(list(leader.track), block, reach)
+    try:
+        found_at = fleet.wait_until(found, 200.0, "robot_0 to find block_short")
+    except ScenarioError as err:
+        print("lifecycle: %s" % err)
+        return 1
+    uuid = leader.shares()[0][1].uuid if sharing else None
+    removed_at = None
+    if args.remove_after is not None:
+        fleet.wait_until(lambda: rospy.get_time() >= found_at + args.remove_after, args.remove_after + 10.0,
+                         "the removal time")
+        fleet.remove_block("block_short")
+        removed_at = rospy.get_time()
+    fleet.wait_until(lambda: rospy.get_time() >= found_at + args.delay, args.delay + 10.0, "the dispatch time")
+    held_at_dispatch = bool(uuid and uuid in follower.obstacles())
+    follower_sent = follower.send("goal_1")
+    result = follower.wait(args.goal_timeout)
+    leader_result = leader.wait(max(1.0, leader_sent + args.goal_timeout - rospy.get_time()))
+    verify = None
+    if removed_at is not None and uuid:
+        verify = check_the_place(fleet, leader, uuid, args.goal_timeout)
+    deleted = {}
+    with fleet.lock:
+        track = [(t, x, y) for t, x, y in follower.track if t >= follower_sent]
+        for r in fleet.robots:
+            gone = [t for t, u in r.expired if u == uuid]
+            deleted[r.name] = gone[0] if gone else None
+        messages = [(t, m.source, m.resolution, [cell_centre(m, i) for i in m.marked_indexes])
+                    for r in fleet.robots for t, m in r.to_fleet if m.source == r.name and m.marked_indexes]
+        follower_on_block = [t for t, source, res, points in messages if source == follower.name and t >= follower_sent
+                             and any(on_block(x, y, res, block) for x, y in points)]
+    entered = crossed_mouth(track, short)
+    out = {
+        "sharing": sharing, "delay_s": args.delay, "remove_after_s": args.remove_after,
+        "found_at": found_at, "follower_sent": follower_sent, "removed_at": removed_at,
+        "held_at_dispatch": held_at_dispatch,
+        "follower_entered_blocked_corridor": entered,
+        # found the block itself: shared it anew (sharing on), or drove up to it (off: nothing to share)
+        "follower_rediscovered": removed_at is None and (bool(follower_on_block) if sharing else entered),
+        "follower_reached": result[1] == "SUCCEEDED",
+        "follower_time_to_goal": (rospy.get_time() - follower_sent) if result[1] == "SUCCEEDED" else None,
+        "leader_reached": leader_result[1] == "SUCCEEDED",
+        "deleted_at": deleted,
+        "obstacle_duration_s": rospy.get_param("/robot_0/sharing_handler/obstacle_duration", None),
+        "ground_truth": run_figures([m for m in messages if removed_at is None or m[0] < removed_at],
+                                    {r.name: list(r.track) for r in fleet.robots}, {"block_short": block},
+                                    fleet.facility["corridors"], 0.2),
+    }
+    if removed_at is not None:
+        # a stale detour: sent while the removed block's obstacle was still held, and not through the short corridor
+        out["stale_detour"] = bool(held_at_dispatch and not entered)
+        out["stale_detour_s"] = (follower_sent - removed_at) if out["stale_detour"] else 0.0
+        times = [t for t in deleted.values() if t is not None]
+        out["costmaps_free_after_deletion"] = {
+            r.name: costmap_free_at(r.costmap, [cell_centre(m, i) for _t, m in leader.shares() for i in m.marked_indexes])
+            for r in fleet.robots} if times else None
+        out["deletion_spread_s"] = (max(times) - min(times)) if len(times) == len(deleted) and times else None
+        out["verification"] = verify
+    with open(args.out, "w") as f:
+        json.dump(out, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
