@@ -14,6 +14,7 @@ import time
 import unittest
 
 import rospy
+from visualization_msgs.msg import MarkerArray
 import rostest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
@@ -70,6 +71,8 @@ class Bus:
         sub(NS + "to_fleet", SharedObstacle, self._rec(self.fleet), queue_size=1000)
         sub(NS + "expired_obstacles", String, lambda m: self._rec(self.expired)(m.data), queue_size=100)
         sub(NS + "shared_obstacle_list", SharedObstacleArray, self._on_list, queue_size=10)
+        self.markers = None
+        sub(NS + "fleet_obstacle_markers", MarkerArray, self._on_markers, queue_size=10)
         sub("/diagnostics", DiagnosticArray, self._on_diag, queue_size=100)
         sub("/rosout", Log, self._on_rosout, queue_size=1000)
         self.proposals = rospy.Publisher(NS + "obstacle_proposals", SharedObstacle, queue_size=100)
@@ -92,6 +95,12 @@ class Bus:
 
     def _on_list(self, msg):
         self.list = msg
+
+    def _on_markers(self, msg):
+        self.markers = msg
+
+    def labels(self):
+        return [m.text for m in self.markers.markers if m.ns == "fleet_obstacles/labels"] if self.markers else []
 
     def _on_diag(self, msg):
         for status in msg.status:
@@ -243,6 +252,16 @@ class TestHandlerNode(unittest.TestCase):
         self.assertEqual(again.uuid, reply.uuid)
         wait_for(lambda: bus.fleet[-1].uuid == reply.uuid and bus.fleet[-1].version == 2,
                  what="the update of the manual obstacle on to_fleet")
+
+    def test_06b_the_fleets_obstacles_are_drawn_for_rviz_with_source_age_time_left_and_cells(self):
+        bus = self.bus
+        wait_for(lambda: bus.list and bus.list.obstacles and len(bus.labels()) == len(bus.list.obstacles),
+                 what="one label per listed obstacle on fleet_obstacle_markers")
+        labels = bus.labels()
+        for o in bus.list.obstacles:
+            self.assertTrue(any(text.startswith(o.source + " · ") and text.endswith(
+                " · %d cells" % len(o.marked_indexes)) for text in labels), (o.uuid, labels))
+        self.assertEqual(bus.markers.markers[0].action, 3)   # DELETEALL first: gone obstacles vanish
 
     def test_07_expiry_tells_the_layer_and_sends_nothing_to_the_fleet(self):
         bus = self.bus

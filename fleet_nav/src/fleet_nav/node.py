@@ -433,7 +433,9 @@ class NavNode:
     def _publish_markers(self):
         markers = MarkerArray()
         clear = Marker()
+        clear.header.frame_id = self.params.global_frame
         clear.action = Marker.DELETEALL
+        clear.pose.orientation.w = 1.0
         markers.markers.append(clear)
         g = self.costmap.geometry
         for i, uuid in enumerate(self.costmap.layer.shared_uuids()):
@@ -444,8 +446,7 @@ class NavNode:
             m.scale.x = m.scale.y = g.resolution
             m.scale.z = 0.2
             m.color.r, m.color.g, m.color.b, m.color.a = 0.86, 0.12, 0.63, 0.9
-            m.pose.orientation.w = 1.0
-            m.text = uuid
+            m.pose.orientation.w = 1.0  # (no text: RViz ignores it on a CUBE_LIST and warns)
             from geometry_msgs.msg import Point
             for x, y in self.costmap.cell_to_world(self.costmap.layer.shared_cells(uuid)):
                 m.points.append(Point(float(x), float(y), 0.1))

@@ -15,8 +15,10 @@ from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 from sharing_msgs.srv import AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse
 from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
 
 from sharing_handler_py import snapshot
+from sharing_handler_py.markers import obstacle_markers
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError, InvalidRequestError
 from sharing_handler_py.logic import SharingHandler, remaining_deadline
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
@@ -118,6 +120,9 @@ class HandlerNode:
         self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
                                          latch=True)
         self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        # RViz: the fleet's obstacles with source, age, time left and cells (markers.py), on every change and
+        # at each tick (the ages move)
+        self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1, latch=True)
         self.handler = SharingHandler(
             params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
             on_to_layer=lambda o: self._deliver(self._pub_layer, o),
@@ -221,6 +226,7 @@ class HandlerNode:
         with self._lock:
             self.handler.expire()
             self._publish_diagnostics()
+            self._publish_markers()
             if self.params.snapshot_file and self._snapshot_written != self._changes:
                 self._write_snapshot()
 
@@ -236,6 +242,13 @@ class HandlerNode:
         array.obstacles = [self._list_entry(h, now, fresh) for h in self.handler.obstacles()]
         self._list_cache = fresh
         self._pub_list.publish(array)
+        self._publish_markers()
+
+    def _publish_markers(self):
+        if self._pub_markers.get_num_connections() == 0 and self._changes > 1:
+            return  # nobody looks (the latched first array still tells a late RViz there is nothing)
+        self._pub_markers.publish(obstacle_markers(self.handler.obstacles(), rospy.get_time(),
+                                                   self._map_frame or "map", rospy.Time.now()))
 
     def _list_entry(self, held, now, fresh):
         """Full-state message of one held obstacle. The message built for the last list is
