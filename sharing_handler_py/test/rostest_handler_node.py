@@ -21,7 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import OccupancyGrid
 from rosgraph_msgs.msg import Log
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
-from sharing_msgs.srv import AddObstacle, ListObstacles
+from sharing_msgs.srv import AddObstacle, ListObstacles, RemoveObstacle
 from std_msgs.msg import String
 
 NS = "/robot_0/"
@@ -262,6 +262,23 @@ class TestHandlerNode(unittest.TestCase):
             self.assertTrue(any(text.startswith(o.source + " · ") and text.endswith(
                 " · %d cells" % len(o.marked_indexes)) for text in labels), (o.uuid, labels))
         self.assertEqual(bus.markers.markers[0].action, 3)   # DELETEALL first: gone obstacles vanish
+
+    def test_06c_remove_obstacle_clears_it_fleet_wide_and_refuses_without_a_requester(self):
+        bus = self.bus
+        remove = rospy.ServiceProxy(NS + "remove_obstacle", RemoveObstacle)
+        reply = self.add_srv(rectangle_shape=[4.0, 2.0, 4.1, 2.05], marked_indexes=[], deadline=0)
+        self.assertTrue(reply.success, reply.message)
+        wait_for(lambda: reply.uuid in bus.listed(), what="the obstacle to remove in the list")
+        refused = remove(uuid=reply.uuid, rectangle_shape=[], requested_by="")
+        self.assertFalse(refused.success)
+        self.assertIn("requested_by", refused.message)
+        done = remove(uuid=reply.uuid, rectangle_shape=[], requested_by="rostest")
+        self.assertTrue(done.success, done.message)
+        self.assertEqual(list(done.removed), [reply.uuid])
+        wait_for(lambda: reply.uuid not in bus.listed(), what="the removed obstacle gone from the list")
+        out = [m for m in bus.fleet if m.uuid == reply.uuid][-1]
+        self.assertEqual((list(out.marked_indexes), out.source), ([], "robot_0"))
+        self.assertTrue(out.cleared_indexes)
 
     def test_07_expiry_tells_the_layer_and_sends_nothing_to_the_fleet(self):
         bus = self.bus

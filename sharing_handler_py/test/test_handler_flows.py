@@ -426,3 +426,43 @@ def test_a_newer_mark_shows_a_cleared_obstacle_again_and_an_older_one_does_not()
     r.handler.on_external(update(U("a"), marked=(2,), version=4, source="robot_1"))   # the block is back
     assert [(h.uuid, h.cells) for h in r.handler.obstacles()] == [(U("a"), (2,))]
     assert r.handler.counters["cleared_by_evidence"] == 1
+
+
+def test_remove_by_hand_clears_every_cell_fleet_wide_and_says_who_asked(caplog):
+    """Issue 28: remove_obstacle. The removal is this robot's update clearing every present cell: the
+    fleet applies it like evidence, so every robot drops the obstacle; this robot's layer is told too."""
+    a, b = Recorder("robot_0", duration=1200), Recorder("robot_1", duration=1200)
+    first = a.handler.on_proposal(proposal(cells=(10, 11, 12), rectangle=rect(0, 0, 1, 1)))
+    other = a.handler.on_proposal(proposal(cells=(500,), rectangle=rect(3, 3, 4, 4)))
+    for m in (first, other):
+        b.handler.on_external(m)
+    with caplog.at_level("INFO"):
+        removed = b.handler.remove(uuid=first.uuid, requested_by="operator anna")
+    assert removed == [first.uuid]
+    assert "requested by operator anna" in caplog.text
+    out = b.fleet[-1]
+    assert (out.uuid, out.source, out.marked, set(out.cleared)) == (first.uuid, "robot_1", (), {10, 11, 12})
+    assert b.layer[-1] == out                     # b's own layer draws it no more
+    a.handler.on_external(out)
+    for r in (a, b):
+        assert [h.uuid for h in r.handler.obstacles()] == [other.uuid]
+    # by rectangle: every listed obstacle that meets it
+    assert b.handler.remove(rectangle=[2.5, 2.5, 3.1, 3.1], requested_by="tool") == [other.uuid]
+    assert b.handler.obstacles() == []
+
+
+@pytest.mark.parametrize("kwargs, reason", [
+    (dict(uuid=U("nope"), requested_by="x"), "no obstacle"),
+    (dict(rectangle=[9, 9, 10, 10], requested_by="x"), "no listed obstacle meets"),
+    (dict(rectangle=[1, 1, 0, 0], requested_by="x"), "give a uuid or a rectangle"),
+    (dict(rectangle="everything", requested_by="x"), "give a uuid or a rectangle"),
+    (dict(uuid=U("a"), requested_by=" "), "requested_by"),
+])
+def test_a_removal_that_cannot_be_done_says_why_and_changes_nothing(kwargs, reason):
+    from sharing_handler_py.errors import InvalidRequestError
+    r = Recorder(duration=1200)
+    r.handler.on_external(update(U("a"), marked=(1,), version=1, source="robot_1", rectangle=rect(0, 0, 1, 1)))
+    before = (r.handler.obstacles(), list(r.fleet), list(r.layer))
+    with pytest.raises(InvalidRequestError, match=reason):
+        r.handler.remove(**kwargs)
+    assert (r.handler.obstacles(), list(r.fleet), list(r.layer)) == before

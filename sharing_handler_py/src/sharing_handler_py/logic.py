@@ -118,6 +118,11 @@ class HeldObstacle:
                         frame_id=self.frame_id)
 
 
+def _meets(a, b):
+    """Whether two rectangles overlap or touch."""
+    return a.min_x <= b.max_x and b.min_x <= a.max_x and a.min_y <= b.max_y and b.min_y <= a.max_y
+
+
 def remaining_deadline(remaining):
     """Seconds left -> the deadline a message carries: whole seconds rounded down (a copy must
     not outlive the original), at least 1 (0 would be refused as expiring on arrival)."""
@@ -563,6 +568,48 @@ class SharingHandler:
             raise InvalidRequestError("rectangle %s lies within merge_distance of obstacle %s, and the "
                                       "update of it was refused (see the log)" % (rectangle, near.uuid))
         return update
+
+    def remove(self, uuid=None, rectangle=None, requested_by=""):
+        """Removes obstacles fleet-wide by hand: `uuid`, or every listed obstacle whose rectangle meets
+        `rectangle` (a Rectangle or [min_x, min_y, max_x, max_y]). Each goes out as this robot's update
+        clearing every present cell (as if seen free), to the fleet and to the layer, so every robot drops
+        it (issue 26's rule, issue 28's service). Returns the uuids removed; raises InvalidRequestError
+        saying why nothing could be."""
+        if not requested_by or not str(requested_by).strip():
+            raise InvalidRequestError("say who asks (requested_by): a removal is logged with its requester")
+        if uuid:
+            uuid = self.resolve(uuid)
+            entry = self._entries.get(uuid)
+            if entry is None or not entry.present:
+                raise InvalidRequestError("no obstacle %s is listed here" % uuid)
+            targets = [entry]
+        else:
+            try:
+                if not isinstance(rectangle, Rectangle):
+                    rectangle = Rectangle.from_sequence(rectangle)
+            except (InvalidMessageError, TypeError, ValueError) as err:
+                raise InvalidRequestError("give a uuid or a rectangle [min_x, min_y, max_x, max_y]: %s" % err) \
+                    from None
+            targets = [e for _u, e in sorted(self._entries.items()) if e.present and _meets(e.rectangle, rectangle)]
+            if not targets:
+                raise InvalidRequestError("no listed obstacle meets %s" % (rectangle,))
+        removed = []
+        for entry in targets:
+            clear = Obstacle(uuid=entry.uuid, marked=(), cleared=tuple(sorted(entry.present)),
+                             deadline=max(1, remaining_deadline(entry.expires_at - self._clock())),
+                             rectangle=entry.rectangle, source=self.robot_name, geometry=entry.geometry,
+                             version=entry.max_version + 1, frame_id=entry.frame_id, stamp=self._clock())
+            _log.info("%s: obstacle %s (from %s, %d cells) removed by hand, requested by %s", self.robot_name,
+                      entry.uuid, entry.source, len(entry.present), str(requested_by)[:80])
+            self._to_fleet(clear)
+            self._counters["updates_out"] += 1
+            self._to_layer(clear)
+            shown = bool(entry.present)
+            entry.apply(clear)
+            self._note_shown(entry, shown, clear)
+            removed.append(entry.uuid)
+        self._on_change()
+        return removed
 
     def expire(self):
         """Removes every obstacle whose deadline has passed since its local arrival (no message

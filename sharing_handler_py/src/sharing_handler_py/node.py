@@ -13,7 +13,8 @@ from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
-from sharing_msgs.srv import AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse
+from sharing_msgs.srv import (AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse, RemoveObstacle,
+                              RemoveObstacleResponse)
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
@@ -142,6 +143,7 @@ class HandlerNode:
         rospy.Subscriber("from_fleet", SharedObstacle, self._on_fleet, queue_size=1000)
         rospy.Service("list_obstacles", ListObstacles, self._on_list)
         rospy.Service("add_obstacle", AddObstacle, self._on_add)
+        rospy.Service("remove_obstacle", RemoveObstacle, self._on_remove)
         self._timer = rospy.Timer(rospy.Duration(1.0 / params.expiry_rate), self._on_tick)
         rospy.loginfo("%s: sharing handler up (obstacle_duration %g s, merge_distance %g m, expiry %g Hz, "
                       "map %s, snapshot %s)", params.robot_name, params.obstacle_duration,
@@ -221,6 +223,19 @@ class HandlerNode:
             rospy.logwarn("%s: add_obstacle refused: %s", self.params.robot_name, err)
             return AddObstacleResponse(success=False, message=str(err), uuid="")
         return AddObstacleResponse(success=True, message="shared", uuid=shared.uuid)
+
+    def _on_remove(self, request):
+        try:
+            with self._lock:
+                removed = self.handler.remove(uuid=request.uuid or None,
+                                              rectangle=None if request.uuid else list(request.rectangle_shape),
+                                              requested_by=request.requested_by)
+        except InvalidRequestError as err:
+            rospy.logwarn("%s: remove_obstacle (requested by %r) refused: %s", self.params.robot_name,
+                          request.requested_by[:80], err)
+            return RemoveObstacleResponse(success=False, message=str(err), removed=[])
+        return RemoveObstacleResponse(success=True, message="removed fleet-wide: %s" % ", ".join(removed),
+                                      removed=removed)
 
     def _on_tick(self, _event):
         with self._lock:
