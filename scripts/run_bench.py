@@ -4,9 +4,10 @@
 Usage: run_bench.py [NAME ...]        (make bench, or make bench NAME=core)
 
 Each benchmark prints its figures as it goes (ratios against a baseline measured in the
-same run); the output is also kept in out/bench/NAME.txt. A benchmark exits non-zero when
-it crashed or missed its target; this runner goes on with the others and exits non-zero
-if any did.
+same run); the output is also kept in out/bench/NAME.txt. A target missed is printed as
+NOT MET with its figure and listed in the summary, but fails nothing (these machines are
+noisy); a benchmark that crashed or could not run exits non-zero, and then so does this
+runner, after the others ran.
 """
 import os
 import subprocess
@@ -62,16 +63,21 @@ def run(name):
     os.makedirs(OUT, exist_ok=True)
     log_path = os.path.join(OUT, name + ".txt")
     start = time.time()
+    missed = []
     with open(log_path, "w") as log:
         proc = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 universal_newlines=True, bufsize=1)
         for line in proc.stdout:
             sys.stdout.write(line)
             log.write(line)
+            if "NOT MET" in line and not line.startswith(("targets:", "targets_met:")):
+                missed.append(line.strip())
         proc.wait()
     print("=== bench %s: exit %d after %.0f s (output in %s)"
           % (name, proc.returncode, time.time() - start, os.path.relpath(log_path, ROOT)), flush=True)
-    return "ok" if proc.returncode == 0 else "exit %d" % proc.returncode
+    if proc.returncode != 0:
+        return "exit %d" % proc.returncode
+    return "ok" if not missed else "ok, target missed: " + "; ".join(missed)
 
 
 def main(argv):
@@ -84,7 +90,7 @@ def main(argv):
     print("\nsummary:")
     for name, result in results:
         print("  %-9s %s" % (name, result))
-    return 0 if all(result == "ok" for _, result in results) else 1
+    return 0 if all(result.startswith("ok") for _, result in results) else 1
 
 
 if __name__ == "__main__":
