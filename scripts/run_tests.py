@@ -155,7 +155,9 @@ def missing_requirements(path):
     try:
         config = roslaunch.config.load_config_default([path], None, verbose=False)
     except rospkg.ResourceNotFound as err:
-        return "needs ROS package %s, which is not installed" % err.args[0]
+        # roslaunch wraps a $(find pkg) failure: "The following package was not found in <tag>: pkg\nROS path ..."
+        package = str(err.args[0]).splitlines()[0].rsplit(": ", 1)[-1] if err.args else "?"
+        return "needs ROS package %s, which is not installed" % package
     except Exception:  # noqa: BLE001 - another launch error: rostest runs it and reports it as a failure
         return None
     for node in list(config.tests) + list(config.nodes):

@@ -111,6 +111,33 @@ def test_the_plugin_test_is_skipped_naming_costmap_2d_where_it_is_missing():
         pytest.skip("costmap_2d is installed here: the plugin test runs")
 
 
+def test_a_find_in_an_arg_is_skipped_naming_just_the_package(tmp_path):
+    """roslaunch wraps a failed $(find) in an <arg> as "The following package was not found in <arg
+    ...>: pkg" plus the ROS path; the reason names the package alone."""
+    ros_or_skip()
+    path = write(tmp_path, "arg.test", '<arg name="_needs" value="$(find no_such_package_s28)"/>\n'
+                 '<test test-name="t" pkg="rostest" type="hztest"/>')
+    assert runner.missing_requirements(path) == "needs ROS package no_such_package_s28, which is not installed"
+
+
+def test_the_real_stack_test_is_skipped_naming_a_missing_package():
+    """move_base_corridors.test (fleet_launch/move_base_fleet.launch) needs stage_ros, move_base,
+    navfn, base_local_planner, map_server and fake_localization, none of them in Debian."""
+    ros_or_skip()
+    import rospkg
+    needed = ("stage_ros", "move_base", "navfn", "base_local_planner", "map_server", "fake_localization")
+    absent = []
+    for name in needed:
+        try:
+            rospkg.RosPack().get_path(name)
+        except rospkg.ResourceNotFound:
+            absent.append(name)
+    if not absent:
+        pytest.skip("the real stack is installed here: move_base_corridors.test runs")
+    reason = runner.missing_requirements(os.path.join(ROOT, "tests", "test", "move_base_corridors.test"))
+    assert reason in ["needs ROS package %s, which is not installed" % name for name in absent]
+
+
 def test_a_skip_is_counted_and_kept_as_junit(tmp_path):
     xml = str(tmp_path / "rostest" / "x" / "skipped.xml")
     runner.write_skipped_junit(xml, "x", "needs ROS package costmap_2d, which is not installed")
