@@ -133,9 +133,10 @@ def test_partition_heals_and_lists_converge_without_resurrecting_cleared_cells(f
             proxy.heal()
             wait_for(lambda: converged(r0, r1), "lists equal after the partition healed")
             held = dict((u, cells) for u, _, cells in r1.state())
-            assert set(held) == {x.uuid, y.uuid, z.uuid}
+            # z, every cell of it cleared, is listed by neither robot (issue 26: evidence ends an obstacle)
+            assert set(held) == {x.uuid, y.uuid}
             assert cleared_cell not in held[x.uuid] and 5050 in held[x.uuid]
-            assert held[z.uuid] == ()
+            assert r1.handler.get(z.uuid).cells == () and r0.handler.get(z.uuid).cells == ()  # held until its lease ends
             assert r1.client.counters()["reconnects"] >= 1
         finally:
             proxy.close()

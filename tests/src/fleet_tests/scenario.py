@@ -187,8 +187,11 @@ class Robot:
         x, y, yaw = goal_name if isinstance(goal_name, tuple) else self.fleet.goal(goal_name)
         goal = move_base_goal(x, y, yaw)
         rospy.loginfo("scenario: %s sent to %s (%.2f, %.2f)", self.name, goal_name, x, y)
+        # The time before the goal goes out: a plan the goal causes is recorded at or after it. Taken after
+        # send_goal, a /clock tick in between (a loaded machine) left the only plan "before" the dispatch.
+        sent = rospy.get_time()
         self.client.send_goal(goal)
-        return rospy.get_time()
+        return sent
 
     def wait(self, timeout):
         """(finished, state name, status text) after at most timeout s of simulated time."""
