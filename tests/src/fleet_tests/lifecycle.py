@@ -55,14 +55,22 @@ def check_the_place(fleet, robot, uuid, timeout):
     from fleet_tests.scenario import ScenarioError, cell_centre
     sent = robot.send("look_down")
     cells = [cell_centre(m, i) for r in fleet.robots for _t, m in r.to_fleet if m.uuid == uuid for i in m.marked_indexes]
+    # when each robot stopped listing it (evidence: no message to the layer, the list is the truth)
+    deleted = {r.name: None for r in fleet.robots}
+
+    def all_gone():
+        now = rospy.get_time()
+        for r in fleet.robots:
+            if deleted[r.name] is None and uuid not in r.obstacles():
+                deleted[r.name] = now
+        return all(t is not None for t in deleted.values())
     try:
-        fleet.wait_until(lambda: all(uuid not in r.obstacles() for r in fleet.robots), timeout, "the obstacle's end")
+        fleet.wait_until(all_gone, timeout, "the obstacle's end", period=0.1)
     except ScenarioError as err:
         print("lifecycle: %s" % err)
     robot.wait(max(1.0, sent + timeout - rospy.get_time()))
     with fleet.lock:
         clears = [t for t, m in robot.to_fleet if m.uuid == uuid and m.cleared_indexes and t >= sent]
-        deleted = {r.name: next((t for t, u in r.expired if u == uuid and t >= sent), None) for r in fleet.robots}
     done = [t for t in deleted.values() if t is not None]
     if done:
         fleet.wait_until(lambda: rospy.get_time() >= max(done) + 1.0, 10.0, "1 s after the deletion")
