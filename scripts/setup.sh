@@ -13,7 +13,7 @@ PACKAGES=(
   build-essential cmake pybind11-dev libgtest-dev googletest
   # Python dependencies, all from Debian
   python3-numpy python3-scipy python3-pytest python3-hypothesis python3-yaml
-  python3-pil python3-paho-mqtt
+  python3-pil python3-paho-mqtt python3-jsonschema
   # message packages the nodes use directly
   python3-diagnostic-msgs python3-visualization-msgs python3-std-srvs
   python3-move-base-msgs python3-nav-msgs python3-sensor-msgs python3-geometry-msgs

@@ -1,0 +1,149 @@
+"""rospy node ``vda5050_bridge`` (one per robot, in its namespace): a thin shell around
+``core.BridgeCore`` and ``client.VdaMqttClient``.
+
+In ROS: subscribes ``shared_obstacle_list`` (the handler's latched SharedObstacleArray) and the
+map (``~map_topic``, for the grid the master-control areas are drawn on), optionally ``vda5050_order``
+(std_msgs/String: a VDA 5050 order as JSON, for systems whose orders come from ROS); publishes
+``from_fleet`` (SharedObstacle, source ``master_control``: an external obstacle to the handler,
+as the Coaty bridge delivers a peer's) and ``/diagnostics`` (the counters)."""
+import threading
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import OccupancyGrid
+from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from std_msgs.msg import String
+
+from vda5050_bridge import core
+from vda5050_bridge.client import VdaMqttClient
+
+
+class Node:
+    def __init__(self):
+        ns = rospy.get_namespace().strip("/")
+        self.robot = rospy.get_param("~robot_name", ns.replace("/", "_") or "robot")
+        version = rospy.get_param("~protocol_version", "2.1.0")
+        self.bridge = core.BridgeCore(
+            version, rospy.get_param("~manufacturer", "fleet"), rospy.get_param("~serial_number", self.robot),
+            half_width=float(rospy.get_param("~half_width", 0.3)),
+            limits=core.Limits(max_payload_bytes=int(rospy.get_param("~max_payload_bytes", 1048576)),
+                               max_zones=int(rospy.get_param("~max_zones", 1000)),
+                               max_extent=float(rospy.get_param("~max_zone_extent", 100.0))))
+        self.zone_deadline = int(rospy.get_param("~zone_deadline", 3600))
+        self.lock = threading.Lock()
+        self.grid = None           # (frame_id, resolution, origin_x, origin_y, size_x, size_y)
+        self.published = {}        # uuid -> (version, cells, rect) held by the handler from us
+        self.pending = {}
+        self.pub = rospy.Publisher("from_fleet", SharedObstacle, queue_size=100,
+                                   subscriber_listener=_Resend(self))
+        self.diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=2)
+        self.client = VdaMqttClient(
+            self.bridge, rospy.get_param("~broker_host", "127.0.0.1"), int(rospy.get_param("~broker_port", 1883)),
+            interface_name=rospy.get_param("~interface_name", "uagv"), on_areas=self.on_areas,
+            log=lambda level, line: rospy.logwarn(line))
+        rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self.on_list, queue_size=1)
+        rospy.Subscriber(rospy.get_param("~map_topic", "/map"), OccupancyGrid, self.on_map, queue_size=1)
+        rospy.Subscriber("vda5050_order", String, self.on_order, queue_size=10)
+        self.client.start()
+        rospy.Timer(rospy.Duration(float(rospy.get_param("~state_interval", 10.0))),
+                    lambda _e: self.client.publish_state())
+        rospy.Timer(rospy.Duration(1.0), self.on_diagnostics)
+        rospy.on_shutdown(self.client.stop)
+        rospy.loginfo("%s: vda5050_bridge up: VDA 5050 %s on %s", self.robot, version, self.client.prefix)
+
+    def on_list(self, array):
+        obstacles = []
+        for o in array.obstacles:
+            r = list(o.rectangle_shape)
+            if len(r) == 4:
+                obstacles.append(core.Obstacle(o.uuid, o.source, tuple(float(v) for v in r)))
+        self.client.set_obstacles(obstacles)
+
+    def on_order(self, msg):
+        with self.client.lock:
+            line = self.bridge.on_message("order", msg.data.encode("utf-8"))
+        if line:
+            rospy.logwarn("%s: vda5050_order: %s", self.robot, line)
+        else:
+            self.client.publish_state()
+
+    def on_map(self, grid):
+        info = grid.info
+        with self.lock:
+            self.grid = (grid.header.frame_id or "map", info.resolution, info.origin.position.x,
+                         info.origin.position.y, info.width, info.height)
+            pending, self.pending = self.pending, {}
+        if pending:
+            self.on_areas(pending)
+
+    def on_areas(self, areas):
+        """Master control's blocked areas now: new ones are sent to the handler as external obstacles,
+        withdrawn ones as an update clearing all their cells (the fleet's rule for an obstacle whose
+        every cell was seen free)."""
+        with self.lock:
+            if self.grid is None:
+                self.pending = dict(areas)
+                rospy.logwarn_throttle(10, "%s: no map yet on ~map_topic; master-control areas wait" % self.robot)
+                return
+            frame, res, ox, oy, sx, sy = self.grid
+            out = []
+            for uuid, area in areas.items():
+                if uuid not in self.published:
+                    cells = core.cells_in_polygon(area.polygon, res, ox, oy, sx, sy)
+                    if not cells:
+                        rospy.logwarn("%s: master-control area %s lies outside the map" % (self.robot, area.key))
+                        continue
+                    self.published[uuid] = (1, cells, area.rect)
+                    out.append((uuid, 1, cells, [], area.rect))
+            for uuid in [u for u in self.published if u not in areas]:
+                version, cells, rect = self.published.pop(uuid)
+                out.append((uuid, version + 1, [], cells, rect))
+        self._send(out, frame, res, ox, oy, sx, sy)
+
+    def resend(self, publish):
+        """A (re)started subscriber of from_fleet (a handler) gets every area held now: from_fleet
+        is not latched, and a message published before the connection is up is lost."""
+        with self.lock:
+            if self.grid is None or not self.published:
+                return
+            frame, res, ox, oy, sx, sy = self.grid
+            out = [(uuid, version, cells, [], rect) for uuid, (version, cells, rect) in self.published.items()]
+        self._send(out, frame, res, ox, oy, sx, sy, publish)
+
+    def _send(self, out, frame, res, ox, oy, sx, sy, publish=None):
+        for uuid, version, marked, cleared, rect in out:
+            msg = SharedObstacle()
+            msg.header.stamp = rospy.Time.now()
+            msg.header.frame_id = frame
+            msg.uuid, msg.version, msg.source = uuid, version, core.MASTER_SOURCE
+            msg.marked_indexes, msg.cleared_indexes = marked, cleared
+            msg.deadline = self.zone_deadline
+            msg.rectangle_shape = list(rect)
+            msg.resolution, msg.origin_x, msg.origin_y, msg.size_x, msg.size_y = res, ox, oy, sx, sy
+            (publish or self.pub.publish)(msg)
+
+    def on_diagnostics(self, _event):
+        with self.client.lock:
+            counters = dict(self.bridge.counters)
+        status = DiagnosticStatus(name="vda5050_bridge: %s" % self.robot, hardware_id=self.client.prefix,
+                                  level=DiagnosticStatus.OK if self.client.connected.is_set() else DiagnosticStatus.WARN,
+                                  message="connected" if self.client.connected.is_set() else "not connected")
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(counters.items())]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = rospy.Time.now()
+        self.diag.publish(array)
+
+
+class _Resend(rospy.SubscribeListener):
+    def __init__(self, node):
+        rospy.SubscribeListener.__init__(self)
+        self.node = node
+
+    def peer_subscribe(self, _topic, _publish_all, publish_single):
+        self.node.resend(publish_single)
+
+
+def main():
+    rospy.init_node("vda5050_bridge")
+    Node()
+    rospy.spin()

@@ -1,0 +1,103 @@
+"""Fixtures of the vda5050_bridge tests: the pure modules from src/ (no built workspace needed),
+the VDA 5050 2.0.0 schemas (not shipped: no licence at that tag) from $VDA5050_SCHEMA_DIR or a
+local clone of github.com/VDA5050/VDA5050, and a private mosquitto on 127.0.0.1."""
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+import pytest
+
+SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
+if SRC not in sys.path:
+    sys.path.insert(0, SRC)
+
+#: a git clone of github.com/VDA5050/VDA5050 (tag 2.0.0 is read from it), if any: 2.0.0 has no licence
+#: file, so its schemas are not shipped; without a clone the 2.0.0 cases skip and say so
+VDA_CLONE = os.environ.get("VDA5050_REPO", "")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "broker: needs /usr/sbin/mosquitto (each test starts its own)")
+
+
+@pytest.fixture(scope="session")
+def schema_2_0_0(tmp_path_factory):
+    """Makes the 2.0.0 schemas available through $VDA5050_SCHEMA_DIR; skips when there are none."""
+    env = os.environ.get("VDA5050_SCHEMA_DIR")
+    if env and os.path.isfile(os.path.join(env, "2.0.0", "state.schema")):
+        return env
+    if not VDA_CLONE or not os.path.isdir(VDA_CLONE) or not shutil.which("git"):
+        pytest.skip("VDA 5050 2.0.0 schemas not available (set VDA5050_SCHEMA_DIR or VDA5050_REPO)")
+    root = tmp_path_factory.mktemp("vda_schemas")
+    os.makedirs(os.path.join(str(root), "2.0.0"))
+    for name in ("state", "order", "instantActions", "connection"):
+        out = subprocess.run(["git", "--git-dir", VDA_CLONE, "show", "2.0.0:json_schemas/%s.schema" % name],
+                             capture_output=True)
+        if out.returncode != 0:
+            out = subprocess.run(["git", "-C", VDA_CLONE, "show", "2.0.0:json_schemas/%s.schema" % name],
+                                 capture_output=True)
+        if out.returncode != 0:
+            pytest.skip("cannot read tag 2.0.0 from %s: %s" % (VDA_CLONE, out.stderr.decode()[-200:]))
+        with open(os.path.join(str(root), "2.0.0", name + ".schema"), "wb") as f:
+            f.write(out.stdout)
+    os.environ["VDA5050_SCHEMA_DIR"] = str(root)
+    return str(root)
+
+
+@pytest.fixture
+def wait_for():
+    def wait(predicate, timeout=10.0, what="condition"):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return
+            time.sleep(0.01)
+        raise AssertionError("timed out after %.1f s waiting for %s" % (timeout, what))
+    return wait
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def broker():
+    """A private mosquitto on 127.0.0.1 and a free port; yields (host, port); stopped after."""
+    if not os.access("/usr/sbin/mosquitto", os.X_OK):
+        pytest.skip("mosquitto is not installed (/usr/sbin/mosquitto)")
+    tmp = tempfile.mkdtemp(prefix="vda_broker_")
+    port = _free_port()
+    conf = os.path.join(tmp, "mosquitto.conf")
+    with open(conf, "w") as f:
+        if os.geteuid() == 0:
+            import pwd
+            f.write("user %s\n" % pwd.getpwuid(os.geteuid()).pw_name)
+        f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % port)
+    proc = subprocess.Popen(["/usr/sbin/mosquitto", "-c", conf], stdout=subprocess.DEVNULL,
+                            stderr=open(os.path.join(tmp, "log"), "w"))
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            break
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                raise RuntimeError("mosquitto did not start: %s" % open(os.path.join(tmp, "log")).read())
+            time.sleep(0.05)
+    try:
+        yield ("127.0.0.1", port)
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        shutil.rmtree(tmp, ignore_errors=True)
