@@ -77,7 +77,8 @@ def main():
         lists[robot] = rospy.Publisher("/%s/shared_obstacle_list" % robot, SharedObstacleArray,
                                        queue_size=1, latch=True)
     rospy.Subscriber("/diagnostics", DiagnosticArray, lambda msg: emit(
-        {"event": "diagnostics", "status": [{"name": s.name, "values": {kv.key: kv.value for kv in s.values}}
+        {"event": "diagnostics", "status": [{"name": s.name, "level": ord(s.level) if isinstance(s.level, bytes) else int(s.level),
+                                             "message": s.message, "values": {kv.key: kv.value for kv in s.values}}
                                             for s in msg.status]}))
     emit({"event": "ready"})
     for line in sys.stdin:

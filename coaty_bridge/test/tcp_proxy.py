@@ -18,6 +18,11 @@ class TcpProxy:
         self._open = []        # sockets of live connections (both sides)
         self._cut = False
         self._closed = False
+        # stall(): set = data flows; cleared = the pumps of that direction stop reading (the
+        # connections stay open, the bytes wait in the kernel): a silent stall, not a partition
+        self._flowing = {"up": threading.Event(), "down": threading.Event()}
+        for event in self._flowing.values():
+            event.set()
         threading.Thread(target=self._accept, daemon=True).start()
 
     def _accept(self):
@@ -40,15 +45,22 @@ class TcpProxy:
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             with self._lock:
                 self._open += [client, upstream]
-            threading.Thread(target=self._pump, args=(client, upstream), daemon=True).start()
-            threading.Thread(target=self._pump, args=(upstream, client), daemon=True).start()
+            threading.Thread(target=self._pump, args=(client, upstream, "up"), daemon=True).start()
+            threading.Thread(target=self._pump, args=(upstream, client, "down"), daemon=True).start()
 
-    def _pump(self, src, dst):
+    def _pump(self, src, dst, direction):
+        flowing = self._flowing[direction]
         try:
             while True:
+                while not flowing.wait(0.05):
+                    if self._closed:
+                        return
                 data = src.recv(65536)
                 if not data:
                     break
+                while not flowing.wait(0.05):   # read while a stall began: held back as well
+                    if self._closed:
+                        return
                 dst.sendall(data)
         except OSError:
             pass
@@ -71,11 +83,23 @@ class TcpProxy:
                 pass
             sock.close()
 
+    def stall(self, up=True, down=True):
+        """Stops forwarding client -> broker (up) and/or broker -> client (down) without closing
+        anything: TCP and MQTT see nothing wrong until a keepalive runs out."""
+        for name, stop in (("up", up), ("down", down)):
+            if stop:
+                self._flowing[name].clear()
+
+    def resume(self):
+        for event in self._flowing.values():
+            event.set()
+
     def heal(self):
         with self._lock:
             self._cut = False
 
     def close(self):
         self._closed = True
+        self.resume()
         self.cut()
         self._server.close()

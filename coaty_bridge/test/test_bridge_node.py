@@ -132,3 +132,33 @@ def test_node_says_where_its_broker_url_came_from_and_warns_while_unreachable(ro
     expect("robot_2", "broker " + leftover, "from private parameter " + private)
     expect("robot_2", leftover, "unreachable")
     assert node.poll() is None
+
+
+def test_node_diagnostics_report_a_silent_stall_and_the_partitioned_peer(ros_graph, broker, observer, wait_for):
+    """Issue 27, attack 6, on the real nodes: robot_0 reaches the broker through a proxy that
+    stalls (connection open, nothing forwarded): robot_0 reports ERROR "stalled", robot_1 WARN
+    naming robot_0; both OK again once it flows. (Timing with a settable clock: test_liveness.py.)"""
+    from tcp_proxy import TcpProxy
+    proxy = TcpProxy(broker.port)
+    try:
+        ros_graph.bridge("robot_0", "broker_url:=" + proxy.url)
+        ros_graph.bridge("robot_1", "broker_url:=" + broker.url)
+        probe = ros_graph.probe("robot_0", "robot_1")
+
+        def status(robot, level, text=""):
+            def match(event):
+                return event.get("event") == "diagnostics" and any(
+                    s["name"] == "coaty_bridge: " + robot and s["level"] == level and text in s["message"]
+                    for s in event["status"])
+            return probe.expect(match, timeout=20, what="%s level %d %r" % (robot, level, text))
+        for robot in ("robot_0", "robot_1"):
+            status(robot, 0, "connected")
+        diagnostics(probe, "robot_0", "peers_heard", 1)
+        proxy.stall()
+        status("robot_0", 2, "stalled: own heartbeat not echoed")
+        status("robot_1", 1, "robot_0 silent")
+        proxy.resume()
+        for robot in ("robot_0", "robot_1"):
+            status(robot, 0, "connected")
+    finally:
+        proxy.close()

@@ -25,7 +25,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.broker]
 
 OT = codec.DEFAULT_OBJECT_TYPE
 ROBOTS = ("robot_0", "robot_1")
-# fixed Identity ids (the MQTT client id is "Coaty" + their first 18 hex digits: they must differ there)
+# fixed Identity ids (the MQTT client id is "Coaty" + their first 8 hex digits + a per-start nonce)
 IDS = {"robot_0": "a0000000-0000-4000-8000-000000000000", "robot_1": "a1000000-0000-4000-8000-000000000000"}
 PEER = "7c9e6679-7425-40de-944b-e07fc1f90ae7"   # an outside agent (a Coaty JS peer, a plain client)
 RES, OX, OY, SX, SY = 0.05, -5.0, -2.5, 200, 100  # fleet_probe's map

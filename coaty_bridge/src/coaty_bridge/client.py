@@ -9,8 +9,10 @@ its peers for their obstacles (late joiner). Bad input is dropped, logged once
 and counted; the MQTT thread never sees an exception.
 """
 import collections
+import json
 import logging
 import socket
+import secrets
 import ssl
 import threading
 import time
@@ -20,7 +22,9 @@ from dataclasses import dataclass, field
 import paho.mqtt.client as mqtt
 
 from coaty_bridge import codec, footprint as footprints, lifetimes
-from coaty_bridge.errors import CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError
+from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError,
+                                 WrongTypeError)
+from coaty_bridge.liveness import CHANNEL as HEARTBEAT_CHANNEL, OBJECT_TYPE as HEARTBEAT_OBJECT_TYPE, Liveness
 from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
 
@@ -69,12 +73,23 @@ class BridgeConfig:
     password: str = ""
     max_payload_bytes: int = 1024 * 1024
     max_indexes: int = 1_000_000
+    # the handler's caps on one obstacle (same meaning, same defaults): checked before expanding
+    max_obstacle_extent: float = 10.0
+    max_obstacle_cells: int = 0
     offline_queue_size: int = 1000
     compact_indexes: bool = True
     keepalive: int = 60
     reconnect_min_delay: float = 0.5
     reconnect_max_delay: float = 30.0
     discover_window: float = 30.0
+    # Discover answers per requester (sourceId): a token bucket, this many per s with this burst;
+    # one 52-byte Discover costs every bridge one Resolve per obstacle held (issue 27, attack 4)
+    discover_answer_rate: float = 1.0
+    discover_answer_burst: int = 3
+    # s: end-to-end liveness (liveness.py): a heartbeat this often, and WARN/ERROR when our own
+    # heartbeat is not echoed or a peer's not heard for liveness_timeout s (issue 27, attack 6)
+    heartbeat_interval: float = 1.0
+    liveness_timeout: float = 3.0
     authenticate_sources: bool = False
     # metres; fleet-wide. Adverts go out per square of the map and each bridge hears the 3 x 3
     # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet.
@@ -141,10 +156,21 @@ class BridgeConfig:
                 fail(name, "must be an integer >= %d" % low)
         if not isinstance(self.compact_indexes, bool):
             fail("compact_indexes", "must be true or false")
-        for name in ("reconnect_min_delay", "reconnect_max_delay", "discover_window", "broker_warn_interval"):
+        try:
+            object.__setattr__(self, "_limits", codec.CodecLimits(
+                self.max_payload_bytes, self.max_indexes, self.max_obstacle_extent, self.max_obstacle_cells))
+        except ValueError as err:
+            fail("max_obstacle_cells" if "cells" in str(err) else "max_obstacle_extent", err)
+        if isinstance(self.discover_answer_burst, bool) or not isinstance(self.discover_answer_burst, int) \
+                or not 1 <= self.discover_answer_burst <= 1000:
+            fail("discover_answer_burst", "must be an integer 1..1000")
+        for name in ("reconnect_min_delay", "reconnect_max_delay", "discover_window", "broker_warn_interval",
+                     "discover_answer_rate", "heartbeat_interval", "liveness_timeout"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e6:
                 fail(name, "must be a positive number of seconds")
+        if self.liveness_timeout < 2 * self.heartbeat_interval:
+            fail("liveness_timeout", "must be at least twice heartbeat_interval (%g s)" % self.heartbeat_interval)
         if self.reconnect_max_delay < self.reconnect_min_delay:
             fail("reconnect_max_delay", "smaller than reconnect_min_delay")
         area = self.footprint_area_size
@@ -171,7 +197,7 @@ class BridgeConfig:
 
     @property
     def limits(self):
-        return codec.CodecLimits(self.max_payload_bytes, self.max_indexes)
+        return self._limits
 
 
 class BrokerUrlChoice:
@@ -216,11 +242,28 @@ def choose_broker_url(params, wait, default=None):
                            "the default (neither ~broker_url nor ~broker_url_param is set)")
 
 
+def mqtt_client_id(identity_id, nonce=None):
+    """The MQTT client id: "Coaty", 8 hex digits of the Identity id (to tell agents apart in the
+    broker's log) and a random per-start nonce of 10 hex digits (40 bits), 23 characters, the
+    longest every MQTT 3.1.1 broker must accept. The Identity id is public (and, with
+    authenticate_sources, computable from the robot's name), so an id made of it alone let any
+    peer connect under it and make the broker drop the robot (issue 27, attack 5: 19 s cut off).
+    The bridge connects with a clean session (nothing persists under the id), so a fresh id per
+    start costs nothing; it stays the same across reconnects of one start. With per-robot logins
+    the broker also binds the id to the login (``use_username_as_clientid true``, README)."""
+    if nonce is None:
+        nonce = secrets.token_hex(5)
+    return "Coaty" + identity_id.replace("-", "")[:8] + nonce
+
+
 def _make_paho_client(client_id):
     if hasattr(mqtt, "CallbackAPIVersion"):  # paho-mqtt >= 2.0
         return mqtt.Client(mqtt.CallbackAPIVersion.VERSION1, client_id=client_id, clean_session=True)
     return mqtt.Client(client_id=client_id, clean_session=True)
 
+
+#: Requesters whose Discover token buckets are remembered (the quietest are forgotten beyond).
+_MAX_DISCOVER_REQUESTERS = 4096
 
 #: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
 OWN_LOG_PER_OBSTACLE = 200
@@ -232,7 +275,7 @@ class CoatyBridgeClient:
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
 
-    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0, on_footprint=None):
+    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0, on_footprint=None, heartbeats=True):
         self.config = config
         self.identity_id = config.identity_id
         self._on_obstacle = on_obstacle
@@ -251,6 +294,7 @@ class CoatyBridgeClient:
         # (a full-state entry alone cannot carry a clear; see README "Partitions and restarts")
         self._own_log = collections.OrderedDict()
         self._pending_discovers = {}
+        self._discover_buckets = {}  # requester sourceId -> (tokens, last refill), see _discover_allowed
         self._connected = False
         self._ever_connected = False
         self._stopping = False
@@ -262,7 +306,11 @@ class CoatyBridgeClient:
         self._last_unreachable_warn = None
         self._watch_stop = threading.Event()
         self._watch_thread = None
+        # heartbeats=False: the owner calls heartbeat() itself (tests, with an injected clock)
+        self._auto_heartbeats = heartbeats
+        self.liveness = Liveness(config.robot_name, clock, config.liveness_timeout, config.known_robots)
         ns = config.namespace
+        self._heartbeat_topic = str(Topic(ns, "CHN", self.identity_id, filter=HEARTBEAT_CHANNEL))
         self._identity = codec.identity_object(self.identity_id, config.robot_name)
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
         self._footprint_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.footprint_object_type))
@@ -272,11 +320,13 @@ class CoatyBridgeClient:
             (subscription(ns, "ADV::" + config.footprint_object_type), qos),
             (subscription(ns, "DSC", two_way=True), qos),
             (subscription(ns, "RSV", two_way=True), qos),
+            (subscription(ns, "CHN:" + HEARTBEAT_CHANNEL), qos),
         ]
         # Footprint areas heard now (the 3 x 3 around the own robot); none until its position is known.
         self._own_area = None
         self._area_subscriptions = set()
-        self._mqtt = _make_paho_client("Coaty" + self.identity_id.replace("-", "")[:18])
+        self.client_id = mqtt_client_id(self.identity_id)
+        self._mqtt = _make_paho_client(self.client_id)
         self._mqtt.will_set(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=0)
         if config.use_tls:
             self._mqtt.tls_set(ca_certs=config.tls_ca or None, certfile=config.tls_cert or None,
@@ -303,6 +353,57 @@ class CoatyBridgeClient:
         self._watch_thread = threading.Thread(target=self._watch_broker, name="coaty_bridge broker watch",
                                               daemon=True)
         self._watch_thread.start()
+        if self._auto_heartbeats:
+            threading.Thread(target=self._heartbeats, name="coaty_bridge heartbeat", daemon=True).start()
+
+    def _heartbeats(self):
+        while not self._watch_stop.wait(self.config.heartbeat_interval):
+            try:
+                self.heartbeat()
+            except Exception as err:  # noqa: BLE001 - keep beating
+                LOG.error("%s: heartbeat failed: %s: %s", self.config.robot_name, type(err).__name__, err)
+
+    def heartbeat(self, leaving=False):
+        """Publishes one heartbeat (a Channel event only bridges observe); see liveness.py.
+        ``leaving``: the last one of a clean stop, so that peers do not miss this robot."""
+        if not self._connected:
+            return None
+        seq, hears = self.liveness.next_heartbeat()
+        obj = {"objectType": HEARTBEAT_OBJECT_TYPE, "coreType": "CoatyObject", "objectId": self.identity_id,
+               "name": "Heartbeat %s" % self.config.robot_name, "robot": self.config.robot_name,
+               "seq": seq, "hears": hears}
+        if leaving:
+            obj["leaving"] = True
+            return self._mqtt.publish(self._heartbeat_topic, json.dumps({"object": obj}).encode(), qos=1)
+        self._send(self._heartbeat_topic, json.dumps({"object": obj}, separators=(",", ":")).encode(),
+                   queue=False)
+        self._count("heartbeats_sent")
+
+    def _on_heartbeat(self, topic, payload):
+        data = codec.parse_payload(payload, self.config.limits)
+        obj = data.get("object") if isinstance(data, dict) else None
+        if not isinstance(obj, dict) or obj.get("objectType") != HEARTBEAT_OBJECT_TYPE:
+            raise WrongTypeError("heartbeat without a %s object" % HEARTBEAT_OBJECT_TYPE)
+        robot, seq, hears = obj.get("robot"), obj.get("seq"), obj.get("hears")
+        if not isinstance(robot, str) or isinstance(seq, bool) or not isinstance(seq, int) \
+                or not isinstance(hears, list) or not all(isinstance(h, str) for h in hears) or len(hears) > 10000:
+            raise WrongTypeError("heartbeat fields robot %r, seq %r, hears: wrong types" % (str(robot)[:40], seq))
+        check_name(robot, "heartbeat robot")
+        if topic.source_id == self.identity_id:
+            self.liveness.own_echo(seq)
+            return
+        if self.config.authenticate_sources and topic.source_id != identity_for(self.config.namespace, robot):
+            raise ForgedSourceError("heartbeat of %r was sent by %s" % (robot, topic.source_id))
+        if self.config.known_robots and robot not in self.config.known_robots:
+            raise UnknownRobotError("heartbeat of robot %r (sourceId %s): not in known_robots"
+                                    % (robot, topic.source_id))
+        if obj.get("leaving") is True:
+            # a clean stop says so in a last heartbeat: not missed. (The Deadvertise does not tell:
+            # the broker sends the same one as the last will of a robot it lost.)
+            self.liveness.forget(robot)
+            return
+        self.liveness.peer(robot, hears)
+        self._count("heartbeats_received")
 
     def _watch_broker(self):
         while not self._watch_stop.wait(1.0):
@@ -345,6 +446,7 @@ class CoatyBridgeClient:
         self._watch_stop.set()
         if self._connected:
             try:
+                self.heartbeat(leaving=True)   # peers' liveness: gone on purpose, not partitioned
                 info = self._mqtt.publish(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=1)
                 info.wait_for_publish(timeout)
             except (RuntimeError, ValueError) as err:
@@ -574,6 +676,7 @@ class CoatyBridgeClient:
         self._send(str(Topic(ns, "ADV", self.identity_id, core_type="Identity")), payload, queue=False)
         self._send(str(Topic(ns, "ADV", self.identity_id, object_type=codec.IDENTITY_OBJECT_TYPE)),
                    payload, queue=False)
+        self.liveness.reset()
         self._flush_queue()
         self._discover_obstacles()
 
@@ -602,6 +705,10 @@ class CoatyBridgeClient:
         """Handles one MQTT message; bad input is counted, logged and dropped."""
         try:
             topic = parse_topic(topic_text)
+            if topic.event == "CHN" and topic.filter == HEARTBEAT_CHANNEL \
+                    and topic.namespace == self.config.namespace:
+                self._on_heartbeat(topic, payload)   # our own included: the echo is the point
+                return
             if topic.source_id == self.identity_id:
                 self._count("echoes_suppressed")
                 return
@@ -695,7 +802,27 @@ class CoatyBridgeClient:
             LOG.error("%s: could not deliver the footprint of %s: %s: %s", self.config.robot_name,
                       footprint.robot, type(err).__name__, err)
 
+    def _discover_allowed(self, requester):
+        """Token bucket per requester: True when a Discover from it may be answered now. A flood
+        from one requester empties only its own bucket, so others are answered as before."""
+        now = self._clock()
+        rate, burst = self.config.discover_answer_rate, self.config.discover_answer_burst
+        with self._lock:
+            buckets = self._discover_buckets
+            tokens, last = buckets.pop(requester, (float(burst), now))
+            tokens = min(float(burst), tokens + max(0.0, now - last) * rate)
+            allowed = tokens >= 1.0
+            if allowed:
+                tokens -= 1.0
+            buckets[requester] = (tokens, now)  # most recent last
+            while len(buckets) > _MAX_DISCOVER_REQUESTERS:
+                buckets.pop(next(iter(buckets)))  # the longest quiet requester: its bucket is full again
+        return allowed
+
     def _answer_discover(self, topic, request):
+        if not self._discover_allowed(topic.source_id):
+            self._count("dropped.discover_rate_limited")
+            return
         ns = self.config.namespace
         reply = str(Topic(ns, "RSV", self.identity_id, correlation_id=topic.correlation_id))
         self._count("discovers_answered")

@@ -24,8 +24,10 @@ from coaty_bridge.errors import (CoatyError, InvalidJsonError, InvalidPayloadErr
                                  NonFiniteNumberError, OutOfRangeError, PayloadTooLargeError,
                                  TooManyIndexesError, WrongTypeError)
 from coaty_bridge.topics import check_uuid, _UUID_RE
-from coaty_bridge.errors import InvalidNameError
+from coaty_bridge.errors import InvalidNameError, ObstacleCellsError, ObstacleExtentError
 from sharing_msgs import obstacle_rules
+from sharing_handler_py.authority import PeerPolicy
+from sharing_handler_py.errors import InvalidMessageError
 
 IDENTITY_OBJECT_TYPE = "coaty.Identity"
 IDENTITY_CORE_TYPE = "Identity"
@@ -36,16 +38,45 @@ MAX_TEXT = obstacle_rules.MAX_TEXT
 
 
 @dataclass(frozen=True)
+class _Geometry:
+    resolution: float
+
+
+@dataclass(frozen=True)
+class _Rectangle:
+    min_x: float
+    min_y: float
+    max_x: float
+    max_y: float
+
+    def __str__(self):
+        return "[%g, %g, %g, %g]" % (self.min_x, self.min_y, self.max_x, self.max_y)
+
+
+@dataclass(frozen=True)
 class CodecLimits:
     """Bounds applied to everything that arrives."""
     max_payload_bytes: int = 1024 * 1024
     max_indexes: int = 1_000_000
+    # The handler's caps (sharing_handler_py.authority.PeerPolicy, the same rules): checked
+    # here before the index sets are expanded (issue 27, attack 4).
+    max_obstacle_extent: float = 10.0   # m, longest side of the rectangle
+    max_obstacle_cells: int = 0         # 0 = the cells of a max_obstacle_extent square (+1 cell a side)
 
     def __post_init__(self):
         for name in ("max_payload_bytes", "max_indexes"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError("%s must be a positive integer, got %r" % (name, value))
+        # PeerPolicy validates both caps and raises ValueError naming a bad one
+        object.__setattr__(self, "policy", PeerPolicy(max_extent=self.max_obstacle_extent, max_lifetime=1,
+                                                      max_obstacle_cells=self.max_obstacle_cells))
+
+    def obstacle_cell_cap(self, resolution):
+        """Cells one obstacle may hold on a grid of this resolution (the handler's rule)."""
+        if not (isinstance(resolution, (int, float)) and math.isfinite(resolution) and resolution > 0):
+            return self.max_indexes  # an unusable resolution is refused by the field checks
+        return self.policy.cell_cap(_Geometry(resolution))
 
 
 def _is_uuid(value):
@@ -186,9 +217,20 @@ def _num_list(obj, key, length):
     return [float(v) for v in value]
 
 
-def _indexes(obj, key, cells, max_count):
+def _indexes(obj, key, cells, max_count, cell_cap=None):
     value = _get(obj, key)
     limit = min(cells, max_count)
+    if cell_cap is not None and cell_cap < limit:
+        # the obstacle cap is the tighter bound: decode_indexes stops at it (never expands more)
+        try:
+            if isinstance(value, str):
+                return compact.decode_indexes(value, cells, cell_cap)
+            if isinstance(value, list) and len(value) > cell_cap:
+                raise TooManyIndexesError("%s has %d indexes" % (key, len(value)))
+        except TooManyIndexesError as err:
+            raise ObstacleCellsError("%s: more cells than max_obstacle_cells %d allows for one obstacle (%s)"
+                                     % (key, cell_cap, err)) from None
+        limit = cell_cap
     if isinstance(value, str):
         return compact.decode_indexes(value, cells, limit)
     if not isinstance(value, list):
@@ -255,6 +297,17 @@ def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimit
     size_y = _int({"size_y": size[1]}, "size_y", 1, MAX_UINT32)
     cells = size_x * size_y
     origin = _num_list(obj, "origin", 2)
+    rectangle = tuple(_num_list(obj, "rectangle", 4))
+    resolution = _num(obj, "resolution")
+    # Bounded authority before expansion (issue 27, attack 4): a few bytes of compact indexes can
+    # declare 10^6 cells; the handler would drop the obstacle, so do not build it at all.
+    try:
+        limits.policy.check_extent(_Rectangle(*rectangle), "rectangle of obstacle %s" % uuid)
+    except InvalidMessageError as err:
+        raise ObstacleExtentError(str(err)) from None
+    cell_cap = limits.obstacle_cell_cap(resolution)
+    marked = _indexes(obj, "markedIndexes", cells, limits.max_indexes, cell_cap)
+    cleared = _indexes(obj, "clearedIndexes", cells, limits.max_indexes, cell_cap)
     return ObstacleUpdate(
         uuid=uuid,
         source=_str(obj, "source"),
@@ -262,14 +315,14 @@ def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimit
         stamp=_num(obj, "stamp"),
         frame_id=_str(obj, "frameId"),
         deadline=_int(obj, "deadline", 0, MAX_UINT32),
-        rectangle=tuple(_num_list(obj, "rectangle", 4)),
-        resolution=_num(obj, "resolution"),
+        rectangle=rectangle,
+        resolution=resolution,
         origin_x=origin[0],
         origin_y=origin[1],
         size_x=size_x,
         size_y=size_y,
-        marked=_indexes(obj, "markedIndexes", cells, limits.max_indexes),
-        cleared=_indexes(obj, "clearedIndexes", cells, limits.max_indexes),
+        marked=marked,
+        cleared=cleared,
     )
 
 

@@ -80,3 +80,14 @@ class FootprintTooLargeError(OutOfRangeError):
 class UnknownRobotError(InvalidPayloadError):
     """A footprint advert of a robot that is not in ``known_robots`` (issue 27, item 10)."""
     reason = "unknown_robot"
+
+
+class ObstacleExtentError(OutOfRangeError):
+    """An obstacle's rectangle is longer than max_obstacle_extent (the handler's cap)."""
+    reason = "oversized_rectangle"
+
+
+class ObstacleCellsError(TooManyIndexesError):
+    """An obstacle declares more cells than max_obstacle_cells (the handler's cap); found
+    before the index sets are expanded."""
+    reason = "too_many_obstacle_cells"

@@ -19,6 +19,7 @@ from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_url
+from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue, centroid, moved
@@ -28,9 +29,10 @@ LOG = logging.getLogger(__name__)
 # private parameter -> BridgeConfig field default; the types are checked by BridgeConfig
 _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
-           "offline_queue_size", "compact_indexes", "keepalive", "reconnect_min_delay",
-           "reconnect_max_delay", "discover_window", "authenticate_sources", "footprint_area_size",
-           "broker_warn_interval", "max_footprint_extent", "known_robots")
+           "offline_queue_size", "max_obstacle_extent", "max_obstacle_cells", "compact_indexes", "keepalive", "reconnect_min_delay",
+           "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "authenticate_sources", "footprint_area_size",
+           "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
+           "liveness_timeout")
 
 
 def msg_to_update(msg):
@@ -355,6 +357,7 @@ class BridgeNode:
         level, problem, errors = self.from_fleet.report()
         delivery = dict(("delivery_error." + reason, n) for reason, n in errors.items())
         counters.update(delivery)
+        counters.update(self.client.liveness.values())
         counters["delivered"] = self.from_fleet.delivered
         counters["publishers_repaired"] = self.from_fleet.repaired
         counters["publishers_recreated"] = self.from_fleet.recreated
@@ -365,8 +368,17 @@ class BridgeNode:
             status.level = DiagnosticStatus.WARN
             status.message = problem
         elif self.client.connected:
-            status.level = DiagnosticStatus.OK
-            status.message = "connected to %s" % self.config.broker_url
+            # connected is not enough (issue 27, attack 6): do heartbeats cross the bus?
+            live, reason = self.client.liveness.status()
+            if live == liveness.ERROR:
+                status.level = DiagnosticStatus.ERROR
+                status.message = "connected to %s but %s" % (self.config.broker_url, reason)
+            elif live == liveness.WARN:
+                status.level = DiagnosticStatus.WARN
+                status.message = "connected to %s but %s" % (self.config.broker_url, reason)
+            else:
+                status.level = DiagnosticStatus.OK
+                status.message = "connected to %s" % self.config.broker_url
         else:
             status.level = DiagnosticStatus.WARN
             status.message = "not connected to %s" % self.config.broker_url
