@@ -42,7 +42,7 @@ ScanOutcome ScanPass::run(const Observation& observation, double now_s, const Sc
   summarise(observation, outcome.touch, now_s, parts);
   if (!in_view_.empty())
   {
-    monitorInView(outcome.touch, now_s, parts, outcome.updates);
+    monitorInView(outcome.touch, now_s, parts, rules, outcome.updates);
   }
   return outcome;
 }
@@ -177,7 +177,7 @@ void ScanPass::summarise(const Observation& observation, const ScanTouch& touch,
   last_.new_marked.erase(std::unique(last_.new_marked.begin(), last_.new_marked.end()), last_.new_marked.end());
 }
 
-void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts,
+void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts, const ShareRules& rules,
                              std::vector<ObstacleUpdate>& updates)
 {
   const GridGeometry& g = parts.grid.geometry();
@@ -202,7 +202,6 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
                            std::max(steady_box.max_x, x), std::max(steady_box.max_y, y) };
   }
   ScanEvidence evidence{ marked_watched_, occupied_, touch.watched_free, steady_, steady_box };
-  const ShareRules rules{ parts.statics, parts.fleet.monitoredCells(), parts.robots };
   parts.fleet.monitor(in_view_, evidence, now_s, parts.params, rules, g, parts.observed, parts.flags, updates);
   for (std::uint32_t index : steady_all_)
   {

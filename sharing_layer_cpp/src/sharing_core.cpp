@@ -52,14 +52,12 @@ ScanOutcome SharingCore::processScan(const Observation& observation, double now_
 
 std::vector<Proposal> SharingCore::propose(double robot_x, double robot_y, bool use_memory) const
 {
-  const TriggerInputs in{ params_, geometry(), observed_, flags_, fleet_, statics_,
-                          const_cast<FleetRobots&>(fleet_robots_), scan_.last() };
-  return triggers_.propose(robot_x, robot_y, use_memory, in);
+  return triggers_.propose(robot_x, robot_y, use_memory, triggerInputs());
 }
 
 TriggerReport SharingCore::trigger(TriggerSource source, double now_s, double robot_x, double robot_y)
 {
-  return triggers_.trigger(source, now_s, robot_x, robot_y, triggerInputs());
+  return triggers_.trigger(source, now_s, robot_x, robot_y, fleet_robots_, triggerInputs());
 }
 
 void SharingCore::setPlan(const std::vector<std::pair<double, double>>& poses)
@@ -73,7 +71,7 @@ void SharingCore::setPlan(const std::vector<std::pair<double, double>>& poses)
 
 TriggerReport SharingCore::checkPlan(double robot_x, double robot_y, double now_s)
 {
-  return triggers_.checkPlan(robot_x, robot_y, now_s, triggerInputs());
+  return triggers_.checkPlan(robot_x, robot_y, now_s, fleet_robots_, triggerInputs());
 }
 
 void SharingCore::setInscribedRadius(double radius_m)

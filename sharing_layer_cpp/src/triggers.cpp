@@ -129,7 +129,8 @@ bool TriggerDebounce::signal(double now_s)
 
 // --- The stuck triggers: stuck_feedback, recovery_status, manual ---
 
-TriggerReport Triggers::trigger(TriggerSource source, double now_s, double robot_x, double robot_y, TriggerInputs in)
+TriggerReport Triggers::trigger(TriggerSource source, double now_s, double robot_x, double robot_y,
+                                FleetRobots& robots, const TriggerInputs& in)
 {
   TriggerReport report;
   report.source = source;
@@ -140,7 +141,7 @@ TriggerReport Triggers::trigger(TriggerSource source, double now_s, double robot
     report.message += "ignored: time or robot pose not finite";
     return report;
   }
-  in.robots.expire(now_s);
+  robots.expire(now_s);
   if (!stuck_.signal(now_s))
   {
     report.reason = TriggerReason::Debounced;
@@ -409,7 +410,8 @@ bool Triggers::nearPlan(std::uint32_t index, const std::vector<std::size_t>& ahe
   return false;
 }
 
-TriggerReport Triggers::checkPlan(double robot_x, double robot_y, double now_s, TriggerInputs in)
+TriggerReport Triggers::checkPlan(double robot_x, double robot_y, double now_s, FleetRobots& robots,
+                                  const TriggerInputs& in)
 {
   TriggerReport report;
   report.source = TriggerSource::PlanBlocked;
@@ -418,7 +420,7 @@ TriggerReport Triggers::checkPlan(double robot_x, double robot_y, double now_s, 
   {
     return report;
   }
-  in.robots.expire(now_s);
+  robots.expire(now_s);
   const LayerParams& p = in.params;
   const std::vector<std::size_t> ahead = planAhead(robot_x, robot_y, p.limits.obstacle_range + p.inscribed_radius);
   if (ahead.empty())

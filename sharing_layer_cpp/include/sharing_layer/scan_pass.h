@@ -83,7 +83,8 @@ private:
   /// @brief The summary the triggers read (last_).
   void summarise(const Observation& observation, const ScanTouch& touch, double now_s, ScanParts& parts);
   /// @brief Monitors the obstacles in view; their updates into `updates`.
-  void monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts, std::vector<ObstacleUpdate>& updates);
+  void monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts, const ShareRules& rules,
+                     std::vector<ObstacleUpdate>& updates);
 
   LastScan last_;
   std::vector<SharedObstacle*> in_view_;

@@ -205,11 +205,10 @@ private:
                       std::uint8_t default_value);
   ScanParts scanParts() { return ScanParts{ params_, obstacles_, flags_, statics_, fleet_robots_, observed_, fleet_,
                                             !triggers_.plan().empty() }; }
-  TriggerInputs triggerInputs()
+  TriggerInputs triggerInputs() const
   {
     return TriggerInputs{ params_, geometry(), observed_, flags_, fleet_, statics_, fleet_robots_, scan_.last() };
   }
-  ShareRules shareRules() const { return ShareRules{ statics_, fleet_.monitoredCells(), fleet_robots_ }; }
 
   LayerParams params_;
   Triggers triggers_;          ///< the stuck and plan-blocked triggers, the plan

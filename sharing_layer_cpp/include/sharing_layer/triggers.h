@@ -99,7 +99,7 @@ struct TriggerInputs
   const CellFlags& flags;
   const FleetObstacles& fleet;    ///< cells in shared rectangles are not proposed again
   const StaticMask& statics;
-  FleetRobots& robots;            ///< expired at each trigger; their cells are never proposed
+  const FleetRobots& robots;      ///< their cells are never proposed
   const LastScan& last;           ///< what the last scan marked
 };
 
@@ -119,8 +119,11 @@ public:
 
   /// @brief A "cannot get past" signal; @return true when it starts a burst
   bool signalStuck(double now_s) { return stuck_.signal(now_s); }
-  TriggerReport trigger(TriggerSource source, double now_s, double robot_x, double robot_y, TriggerInputs in);
-  TriggerReport checkPlan(double robot_x, double robot_y, double now_s, TriggerInputs in);
+  /// @param robots the fleet robots of `in`, expired at now_s once the trigger is taken (the one write a trigger
+  /// makes outside its own state)
+  TriggerReport trigger(TriggerSource source, double now_s, double robot_x, double robot_y, FleetRobots& robots,
+                        const TriggerInputs& in);
+  TriggerReport checkPlan(double robot_x, double robot_y, double now_s, FleetRobots& robots, const TriggerInputs& in);
   std::vector<Proposal> propose(double robot_x, double robot_y, bool use_memory, const TriggerInputs& in) const;
 
   /// @brief Keeps the finite poses; @return whether any is left
