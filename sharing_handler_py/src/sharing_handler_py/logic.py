@@ -596,7 +596,7 @@ class SharingHandler:
         removed = []
         for entry in targets:
             clear = Obstacle(uuid=entry.uuid, marked=(), cleared=tuple(sorted(entry.present)),
-                             deadline=max(1, remaining_deadline(entry.expires_at - self._clock())),
+                             deadline=remaining_deadline(entry.expires_at - self._clock()),
                              rectangle=entry.rectangle, source=self.robot_name, geometry=entry.geometry,
                              version=entry.max_version + 1, frame_id=entry.frame_id, stamp=self._clock())
             _log.info("%s: obstacle %s (from %s, %d cells) removed by hand, requested by %s", self.robot_name,
@@ -604,9 +604,8 @@ class SharingHandler:
             self._to_fleet(clear)
             self._counters["updates_out"] += 1
             self._to_layer(clear)
-            shown = bool(entry.present)
             entry.apply(clear)
-            self._note_shown(entry, shown, clear)
+            self._note_shown(entry, True, clear)  # (only listed obstacles are targets)
             removed.append(entry.uuid)
         self._on_change()
         return removed

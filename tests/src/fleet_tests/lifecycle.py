@@ -134,12 +134,8 @@ def main(argv=None):
     verify = None
     if removed_at is not None and uuid:
         verify = check_the_place(fleet, leader, uuid, args.goal_timeout)
-    deleted = {}
     with fleet.lock:
         track = [(t, x, y) for t, x, y in follower.track if t >= follower_sent]
-        for r in fleet.robots:
-            gone = [t for t, u in r.expired if u == uuid]
-            deleted[r.name] = gone[0] if gone else None
         messages = [(t, m.source, m.resolution, [cell_centre(m, i) for i in m.marked_indexes])
                     for r in fleet.robots for t, m in r.to_fleet if m.source == r.name and m.marked_indexes]
         follower_on_block = [t for t, source, res, points in messages if source == follower.name and t >= follower_sent
@@ -155,7 +151,6 @@ def main(argv=None):
         "follower_reached": result[1] == "SUCCEEDED",
         "follower_time_to_goal": (rospy.get_time() - follower_sent) if result[1] == "SUCCEEDED" else None,
         "leader_reached": leader_result[1] == "SUCCEEDED",
-        "deleted_at": deleted,
         "obstacle_duration_s": rospy.get_param("/robot_0/sharing_handler/obstacle_duration", None),
         "ground_truth": run_figures([m for m in messages if removed_at is None or m[0] < removed_at],
                                     {r.name: list(r.track) for r in fleet.robots}, {"block_short": block},
@@ -165,11 +160,6 @@ def main(argv=None):
         # a stale detour: sent while the removed block's obstacle was still held, and not through the short corridor
         out["stale_detour"] = bool(held_at_dispatch and not entered)
         out["stale_detour_s"] = (follower_sent - removed_at) if out["stale_detour"] else 0.0
-        times = [t for t in deleted.values() if t is not None]
-        out["costmaps_free_after_deletion"] = {
-            r.name: costmap_free_at(r.costmap, [cell_centre(m, i) for _t, m in leader.shares() for i in m.marked_indexes])
-            for r in fleet.robots} if times else None
-        out["deletion_spread_s"] = (max(times) - min(times)) if len(times) == len(deleted) and times else None
         out["verification"] = verify
     with open(args.out, "w") as f:
         json.dump(out, f, indent=1)
