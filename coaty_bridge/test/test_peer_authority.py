@@ -9,8 +9,6 @@ the wall clock (the stamps of the peers' messages are compared with it), so leas
 are judged without waiting.
 """
 import json
-import os
-import sys
 import threading
 import uuid as uuidlib
 
@@ -21,12 +19,9 @@ from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.topics import Topic
 
-HANDLER_SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-                           "sharing_handler_py", "src")
-if HANDLER_SRC not in sys.path:
-    sys.path.append(HANDLER_SRC)
+from handler_link import to_obstacle, to_update  # (puts sharing_handler_py on the path)
 from sharing_handler_py.logic import SharingHandler  # noqa: E402
-from sharing_handler_py.validation import Geometry, Obstacle, Rectangle  # noqa: E402
+from sharing_handler_py.validation import Geometry  # noqa: E402
 from sharing_msgs import obstacle_rules  # noqa: E402
 
 pytestmark = pytest.mark.broker
@@ -48,21 +43,6 @@ class Clock:
 
     def __call__(self):
         return self.now
-
-
-def to_update(o):
-    g = o.geometry
-    return ObstacleUpdate(uuid=o.uuid, source=o.source, version=o.version, stamp=o.stamp, frame_id=o.frame_id,
-                          deadline=o.deadline, rectangle=tuple(o.rectangle.as_list()), resolution=g.resolution,
-                          origin_x=g.origin_x, origin_y=g.origin_y, size_x=g.size_x, size_y=g.size_y,
-                          marked=o.marked, cleared=o.cleared)
-
-
-def to_obstacle(u):
-    return Obstacle(uuid=u.uuid, marked=u.marked, cleared=u.cleared, deadline=u.deadline,
-                    rectangle=Rectangle(*u.rectangle), source=u.source,
-                    geometry=Geometry(u.resolution, u.origin_x, u.origin_y, u.size_x, u.size_y),
-                    version=u.version, frame_id=u.frame_id, stamp=u.stamp)
 
 
 class Robot:
