@@ -3,10 +3,8 @@ the VDA 5050 2.0.0 schemas (not shipped: no licence at that tag) from $VDA5050_S
 local clone of github.com/VDA5050/VDA5050, and a private mosquitto on 127.0.0.1."""
 import os
 import shutil
-import socket
 import subprocess
 import sys
-import tempfile
 import time
 
 import pytest
@@ -60,44 +58,12 @@ def wait_for():
     return wait
 
 
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture
 def broker():
-    """A private mosquitto on 127.0.0.1 and a free port; yields (host, port); stopped after."""
+    """A private mosquitto on 127.0.0.1 and a free port (the project's own launcher, coaty_bridge.broker);
+    yields (host, port); stopped after."""
+    from coaty_bridge.broker import Broker
     if not os.access("/usr/sbin/mosquitto", os.X_OK):
         pytest.skip("mosquitto is not installed (/usr/sbin/mosquitto)")
-    tmp = tempfile.mkdtemp(prefix="vda_broker_")
-    port = _free_port()
-    conf = os.path.join(tmp, "mosquitto.conf")
-    with open(conf, "w") as f:
-        if os.geteuid() == 0:
-            import pwd
-            f.write("user %s\n" % pwd.getpwuid(os.geteuid()).pw_name)
-        f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % port)
-    proc = subprocess.Popen(["/usr/sbin/mosquitto", "-c", conf], stdout=subprocess.DEVNULL,
-                            stderr=open(os.path.join(tmp, "log"), "w"))
-    deadline = time.monotonic() + 10
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-            break
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                proc.kill()
-                raise RuntimeError("mosquitto did not start: %s" % open(os.path.join(tmp, "log")).read())
-            time.sleep(0.05)
-    try:
-        yield ("127.0.0.1", port)
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        shutil.rmtree(tmp, ignore_errors=True)
+    with Broker() as running:
+        yield (running.host, running.port)
