@@ -16,6 +16,8 @@ With sharing:=false (costmap_2d::ObstacleLayer instead of the sharing layer) the
 the baseline: nothing is shared, and the figures are logged without the corridor assertions.
 
 Each run logs one line "move_base_corridors: RESULT ..." (times in simulated s) for the README's table.
+With ~picture:=FILE.png (rostest ... picture:=FILE.png) it also draws the run: the map, the block, the
+cells robot_0 shared and both robots' ground-truth trails (fleet_tests.run_picture).
 Upstream move_base names its plan move_base/NavfnROS/plan; Stage has no block services, so the world
 stays as it was loaded (fleet_tests.scenario.Fleet is used for its observers only).
 """
@@ -28,6 +30,7 @@ import rostest
 from nav_msgs.msg import Path
 from rosgraph_msgs.msg import Log
 
+from fleet_tests.run_picture import draw_run
 from fleet_tests.scenario import Fleet, ScenarioError, entered, load_facility, wait_for_sim_time
 
 
@@ -79,6 +82,8 @@ class MoveBaseCorridors(unittest.TestCase):
         fleet = self.fleet
         r0, r1 = fleet.robots
         short = fleet.corridor("short")
+        self.outcome = "robot_0 did not arrive"
+        self.addCleanup(self.draw)  # on a failure too: the picture shows where a robot stalled
 
         start0 = r0.send("goal_0")
         first = shared_at = None
@@ -104,6 +109,7 @@ class MoveBaseCorridors(unittest.TestCase):
         if self.sharing:
             self.assertIn(first.uuid, r1.obstacles(), "robot_1's handler does not hold robot_0's obstacle %.1f s "
                           "after the share, when robot_1 is sent" % (rospy.get_time() - shared_at))
+        self.outcome = "robot_1 did not arrive"
         sent = r1.send("goal_1")
         result1 = r1.wait(self.GOAL_TIMEOUT)
         with fleet.lock:
@@ -124,6 +130,7 @@ class MoveBaseCorridors(unittest.TestCase):
                       "%.1f" % (shared_at - start0) if shared_at is not None else "-",
                       ", ".join("%.0f" % (v * 1000) for v in latency) or "-")
 
+        self.outcome = "robot_1 %s%s" % (result1[1], " in %.1f s" % time1 if time1 is not None else "")
         if self.sharing:
             self.assertEqual([], inside[:5], "robot_1, sent after the share, entered the blocked short corridor %s "
                              "(first poses shown)" % (short,))
@@ -133,6 +140,25 @@ class MoveBaseCorridors(unittest.TestCase):
             self.assertTrue(plans, "no plan of robot_1 seen on move_base/NavfnROS/plan")
         self.assertTrue(result1[0] and result1[1] == "SUCCEEDED", "robot_1 did not reach goal_1: %s %s; at %s"
                         % (result1[1], result1[2], r1.pose))
+
+    def draw(self):
+        path = rospy.get_param("~picture", "")
+        if not path:
+            return
+        fleet = self.fleet
+        with fleet.lock:
+            grid = fleet.map
+            trails = {r.name: list(r.track) for r in fleet.robots}
+            shared = [m for r in fleet.robots for _t, m in r.to_fleet if m.source == r.name]
+        if grid is None:
+            rospy.logwarn("move_base_corridors: no /map received, no picture drawn")
+            return
+        title = "upstream move_base + stageros, sharing %s: %s" % ("on" if self.sharing else "off", self.outcome)
+        try:
+            draw_run(path, grid, fleet.facility, trails, shared, title)
+            rospy.loginfo("move_base_corridors: picture of the run in %s", path)
+        except (OSError, ValueError) as err:
+            rospy.logwarn("move_base_corridors: cannot write the picture %s: %s", path, err)
 
 
 if __name__ == "__main__":

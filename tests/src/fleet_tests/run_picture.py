@@ -1,0 +1,72 @@
+"""A picture of one scenario run: the a-priori map, the blocks that are not on it, the cells the
+fleet shared, and every robot's ground-truth trail. Made from what a scenario node already holds
+(the /map message, the facility description, the robots' tracks and shares), so it works the same
+on the real stack (stageros, move_base) and on the stand-in.
+
+    draw_run(path, grid, facility, trails, shared, title)
+
+grid: nav_msgs/OccupancyGrid; facility: scenario.load_facility()'s dict; trails: {name: [(t, x, y)]};
+shared: SharedObstacle messages (their marked cells are drawn). Raises ValueError on a map it cannot
+draw (no cells, bad resolution) rather than writing a misleading picture.
+"""
+from PIL import Image, ImageDraw
+
+# One colour per robot (robot_0 first), readable on the grey map.
+TRAIL_COLOURS = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (148, 103, 189), (140, 86, 75),
+                 (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207), (214, 39, 40)]
+SHARED = (220, 20, 60)
+BLOCK = (0, 0, 0)
+
+
+def draw_run(path, grid, facility, trails, shared, title, pixels_per_metre=40):
+    info = grid.info
+    if info.width <= 0 or info.height <= 0 or not info.resolution > 0 or len(grid.data) != info.width * info.height:
+        raise ValueError("cannot draw the run: map of %d x %d cells at %r m with %d values"
+                         % (info.width, info.height, info.resolution, len(grid.data)))
+    scale = max(1, int(round(pixels_per_metre * info.resolution)))
+    ox, oy, res = info.origin.position.x, info.origin.position.y, info.resolution
+    w, h = info.width * scale, info.height * scale
+    header = 22
+    image = Image.new("RGB", (w, h + header), "white")
+    draw = ImageDraw.Draw(image)
+
+    def px(x, y):
+        return (x - ox) / res * scale, header + h - (y - oy) / res * scale
+
+    for iy in range(info.height):
+        row = grid.data[iy * info.width:(iy + 1) * info.width]
+        for ix, v in enumerate(row):
+            if v == 0:
+                continue
+            colour = (205, 205, 205) if v < 0 else (60, 60, 60)
+            x0, y1 = ix * scale, header + h - iy * scale
+            draw.rectangle([x0, y1 - scale, x0 + scale - 1, y1 - 1], fill=colour)
+    for name, block in sorted(facility.get("blocks", {}).items()):
+        bx, by = float(block["pose"][0]), float(block["pose"][1])
+        sx, sy = float(block["size"][0]), float(block["size"][1])
+        a, b = px(bx - sx / 2, by + sy / 2), px(bx + sx / 2, by - sy / 2)
+        draw.rectangle([a, b], outline=BLOCK, width=2)
+        draw.text((a[0], a[1] - 12), "%s (not on the map)" % name, fill=BLOCK)
+    cell_px = max(2, int(round(scale * 1.0)))
+    for msg in shared:
+        for index in msg.marked_indexes:
+            ix, iy = index % msg.size_x, index // msg.size_x
+            x, y = px(msg.origin_x + (ix + 0.5) * msg.resolution, msg.origin_y + (iy + 0.5) * msg.resolution)
+            draw.rectangle([x - cell_px, y - cell_px, x + cell_px, y + cell_px], fill=SHARED)
+    legend = []
+    for k, (name, track) in enumerate(sorted(trails.items())):
+        colour = TRAIL_COLOURS[k % len(TRAIL_COLOURS)]
+        points = [px(x, y) for _t, x, y in track]
+        if len(points) > 1:
+            draw.line(points, fill=colour, width=3)
+        if points:
+            draw.ellipse([points[-1][0] - 5, points[-1][1] - 5, points[-1][0] + 5, points[-1][1] + 5], fill=colour)
+        legend.append((name, colour))
+    draw.text((4, 4), title, fill=(0, 0, 0))
+    x = w - 10
+    for name, colour in reversed(legend + [("shared cells", SHARED)]):
+        x -= 8 * len(name) + 18
+        draw.rectangle([x, 7, x + 10, 15], fill=colour)
+        draw.text((x + 13, 4), name, fill=colour)
+    image.save(path)
+    return path
