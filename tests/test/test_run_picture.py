@@ -20,7 +20,7 @@ def grid(width=40, height=30, resolution=0.1):
     return g
 
 
-def pixel(image, g, x, y, header=22):
+def pixel(image, g, x, y, header=36):
     scale = max(1, int(round(40 * g.info.resolution)))
     px = int((x - g.info.origin.position.x) / g.info.resolution * scale)
     py = int(header + g.info.height * scale - (y - g.info.origin.position.y) / g.info.resolution * scale)

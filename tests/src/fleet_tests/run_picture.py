@@ -26,7 +26,7 @@ def draw_run(path, grid, facility, trails, shared, title, pixels_per_metre=40):
     scale = max(1, int(round(pixels_per_metre * info.resolution)))
     ox, oy, res = info.origin.position.x, info.origin.position.y, info.resolution
     w, h = info.width * scale, info.height * scale
-    header = 22
+    header = 36  # title on the first line, legend on the second
     image = Image.new("RGB", (w, h + header), "white")
     draw = ImageDraw.Draw(image)
 
@@ -63,10 +63,10 @@ def draw_run(path, grid, facility, trails, shared, title, pixels_per_metre=40):
             draw.ellipse([points[-1][0] - 5, points[-1][1] - 5, points[-1][0] + 5, points[-1][1] + 5], fill=colour)
         legend.append((name, colour))
     draw.text((4, 4), title, fill=(0, 0, 0))
-    x = w - 10
-    for name, colour in reversed(legend + [("shared cells", SHARED)]):
-        x -= 8 * len(name) + 18
-        draw.rectangle([x, 7, x + 10, 15], fill=colour)
-        draw.text((x + 13, 4), name, fill=colour)
+    x = 4
+    for name, colour in legend + [("shared cells", SHARED)]:
+        draw.rectangle([x, 21, x + 10, 29], fill=colour)
+        draw.text((x + 13, 18), name, fill=colour)
+        x += 7 * len(name) + 30
     image.save(path)
     return path
