@@ -81,6 +81,53 @@ def cell_centre(msg, index):
     return msg.origin_x + (ix + 0.5) * msg.resolution, msg.origin_y + (iy + 0.5) * msg.resolution
 
 
+class GoalClient(actionlib.SimpleActionClient):
+    """actionlib's SimpleActionClient without its send_goal race (ros/actionlib#206).
+
+    SimpleActionClient.send_goal sets ``self.gh = None``, publishes the goal and only then stores
+    the new goal handle; the status and result topics are served by other threads, so a status
+    that arrives in between (the action server answers within milliseconds, and a busy process
+    lets the sending thread wait for the GIL) is handed to ``_handle_transition`` while ``self.gh``
+    is still None: actionlib logs "[ERROR] Got a transition callback on a goal handle that we're not
+    tracking" and drops the transition (PENDING/ACTIVE; had it been the result, wait_for_result
+    would have waited in vain). make demo printed that line 1-5 times per run, right after a
+    "sent to" line. Here sending and the callbacks share one lock: a callback that comes while
+    the goal is being sent waits until its handle is stored, and is then handled as usual.
+
+    Transitions of a goal this client replaced while it was still running (send_goal before it
+    finished) are expected and ignored (logged at debug level); any other unknown handle still
+    reaches actionlib's own error path."""
+
+    def __init__(self, ns, action_spec):
+        self._sending = threading.RLock()
+        self._replaced = set()      # goal ids of unfinished goals that send_goal replaced
+        super().__init__(ns, action_spec)
+
+    def send_goal(self, goal, done_cb=None, active_cb=None, feedback_cb=None):
+        with self._sending:
+            old = self.gh
+            if old is not None and old.get_comm_state() != actionlib.CommState.DONE:
+                self._replaced.add(_goal_id(old))
+            super().send_goal(goal, done_cb, active_cb, feedback_cb)
+
+    def _handle_transition(self, gh):
+        with self._sending:
+            if gh != self.gh and _goal_id(gh) in self._replaced:
+                rospy.logdebug("transition of replaced goal %s ignored", _goal_id(gh))
+                return
+            super()._handle_transition(gh)
+
+    def _handle_feedback(self, gh, feedback):
+        with self._sending:
+            if gh != self.gh and _goal_id(gh) in self._replaced:
+                return
+            super()._handle_feedback(gh, feedback)
+
+
+def _goal_id(gh):
+    return gh.comm_state_machine.action_goal.goal_id.id
+
+
 class Robot:
     def __init__(self, fleet, index):
         self.fleet = fleet
@@ -112,7 +159,7 @@ class Robot:
         rospy.Subscriber(ns + "fleet_robots", RobotFootprintArray, self._on_fleet_robots, queue_size=2)
         rospy.Subscriber(ns + "obstacle_proposals", SharedObstacle, self._wall(self.proposals_wall), queue_size=100)
         rospy.Subscriber(ns + "shared_obstacles", SharedObstacle, self._wall(self.layer_in_wall), queue_size=1000)
-        self.client = actionlib.SimpleActionClient(ns + "move_base", MoveBaseAction)
+        self.client = GoalClient(ns + "move_base", MoveBaseAction)
         self.list_srv = rospy.ServiceProxy(ns + "list_obstacles", ListObstacles)
         self.snapshot_srv = rospy.ServiceProxy(ns + "move_base/snapshot", Snapshot)
 
@@ -299,8 +346,8 @@ class Fleet:
             raise ScenarioError("add_block %s refused: %s" % (name, resp.message))
         rospy.loginfo("scenario: block %s added at (%.2f, %.2f, %.2f rad)", name, x, y, yaw)
 
-    def world_snapshot(self, path):
-        return self._snapshot(path, True, 40.0)
+    def world_snapshot(self, path, pixels_per_metre=40.0):
+        return self._snapshot(path, True, pixels_per_metre)
 
     def wait_until(self, predicate, timeout, what, period=0.2):
         """Waits (simulated time) until predicate() is true; raises ScenarioError naming what."""
