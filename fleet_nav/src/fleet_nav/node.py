@@ -201,6 +201,9 @@ class NavNode:
 
     def _on_scan(self, msg):
         try:
+            # The pose at the scan's own stamp, not the newest one: a scan placed with a pose a step
+            # later puts a turning robot's view of a face 0.1 m into free space, and that gets shared
+            # (issue 26; fleet_tests' turn_share.test is red with rospy.Time(0) here).
             sx, sy, sz, syaw = self._lookup(self.params.global_frame, msg.header.frame_id, msg.header.stamp)
             points = core.scan_to_points(np.asarray(msg.ranges, dtype=np.float64), msg.angle_min,
                                          msg.angle_increment, msg.range_min, msg.range_max, sx, sy, syaw, sz)

@@ -16,13 +16,17 @@ Block-removed mode (--remove-after R): the block is taken away R s after the ref
 while nobody is near it. Then the follower is a "stale detour" when it is sent while the obstacle is
 still held and takes the long corridor; the run also reports, once a robot's sensors cover the
 place (the follower driving by, or nobody), when that robot's handler deleted the obstacle and when
-every robot's costmap was free there (issue 26: within 1 s of the first clearing).
+every robot's costmap was free there (issue 26: within 1 s of the first clearing). From message receipts
+(`Receipts`, subscribers, no polling) also: the moment that robot's handler ended the obstacle (the
+update after which no cell of it is present left it for the fleet) to the moment the last robot's
+layer dropped it (the update or expiry after which that layer holds no present cell of it).
 
 Writes FILE (JSON). Pure helpers: tests/test/test_lifecycle_metrics.py."""
 import argparse
 import json
-import math
 import sys
+import threading
+import time
 
 
 def found_block_at(track, block, reach):
@@ -46,11 +50,114 @@ def costmap_free_at(grid, cells):
     return True
 
 
-def check_the_place(fleet, robot, uuid, timeout):
+def present_after(messages):
+    """The cells of one obstacle present after `messages` [(marked, cleared, version, source)], by the handler's
+    and the layer's convergence rule: an update with stamp S = (version, source) marks each marked cell whose
+    stamp is < S, then clears each cleared cell whose stamp is <= S (sharing_handler_py README)."""
+    stamps = {}
+    for marked, cleared, version, source in messages:
+        stamp = (version, source)
+        for cell in marked:
+            if cell not in stamps or stamps[cell][0] < stamp:
+                stamps[cell] = (stamp, True)
+        for cell in cleared:
+            if cell not in stamps or stamps[cell][0] <= stamp:
+                stamps[cell] = (stamp, False)
+    return {cell for cell, (_stamp, present) in stamps.items() if present}
+
+
+def emptied_at(events, after=None):
+    """events [(sim time, kind, marked, cleared, version, source)] of one obstacle at one node, in receipt order
+    (kind "update" applies its cells, "expired" drops them all): the index of the first event at or after sim time
+    `after` after which no cell is present while some was just before it, or None."""
+    applied, shown = [], False
+    for k, (t, kind, marked, cleared, version, source) in enumerate(events):
+        if kind == "expired":
+            applied, now = [], False
+        else:
+            applied.append((marked, cleared, version, source))
+            now = bool(present_after(applied))
+        if shown and not now and (after is None or t >= after):
+            return k
+        shown = now
+    return None
+
+
+class Receipts:
+    """Every obstacle message of each robot's handler and layer, with the sim and wall time of its receipt
+    here (subscribers: no polling): per robot, what its handler sent (to_fleet) and got (from_fleet), what its
+    layer got (shared_obstacles, expired_obstacles) and made itself (obstacle_updates)."""
+
+    TOPICS = {"to_fleet": "handler", "from_fleet": "handler", "shared_obstacles": "layer",
+              "obstacle_updates": "layer", "expired_obstacles": "layer"}
+
+    def __init__(self, robots):
+        import rospy
+        from sharing_msgs.msg import SharedObstacle
+        from std_msgs.msg import String
+        self.lock = threading.Lock()
+        self.events = {(r, node): [] for r in robots for node in ("handler", "layer")}
+        for r in robots:
+            for topic, node in self.TOPICS.items():
+                kind = String if topic == "expired_obstacles" else SharedObstacle
+                rospy.Subscriber("/%s/%s" % (r, topic), kind, self._cb(r, node, topic), queue_size=1000)
+
+    def _cb(self, robot, node, topic):
+        import rospy
+
+        def cb(msg):
+            sim, wall = rospy.get_time(), time.time()
+            if topic == "expired_obstacles":
+                event = (msg.data, sim, wall, "expired", (), (), 0, "")
+            else:
+                event = (msg.uuid, sim, wall, "update", tuple(msg.marked_indexes), tuple(msg.cleared_indexes),
+                         msg.version, msg.source)
+            with self.lock:
+                self.events[(robot, node)].append(event)
+        return cb
+
+    def of(self, robot, node, uuid):
+        """[(sim time, wall time, kind, marked, cleared, version, source)] of uuid at that node, in receipt order."""
+        with self.lock:
+            return [e[1:] for e in self.events[(robot, node)] if e[0] == uuid]
+
+
+def end_to_last_drop(timelines, after=None):
+    """From the clearing robot's handler ending the obstacle to the last robot's layer dropping it.
+
+    timelines: {"handler": {robot: events}, "layer": {robot: events}}, each event (sim time, wall time, kind, marked,
+    cleared, version, source) of the obstacle in receipt order (Receipts.of). A handler ended it with the first
+    message it sent or got (at or after sim time `after`) after which none of its cells is present; the clearing
+    robot is the source of that message (its own update: the peers' handlers follow when it reaches them; the order
+    in which one observer receives different robots' topics says nothing about which came first), and the end is
+    when the clearing robot's handler sent it. A robot's layer dropped it with the first update it got or made, or
+    the expiry, after which it holds none. {"clearer": robot or None, "ended": sim s or None,
+    "dropped": {robot: sim s or None}, "end_to_last_drop_s": sim s, "end_to_last_drop_wall_s": wall s (both None
+    unless the clearing robot's handler ended it and every layer dropped it)}."""
+    def first(events):
+        k = emptied_at([(e[0],) + tuple(e[2:]) for e in events], after)
+        return None if k is None else events[k]
+    ended = {r: first(events) for r, events in sorted(timelines["handler"].items())}
+    sources = sorted({e[6] for e in ended.values() if e is not None and e[2] == "update"})
+    clearer = sources[0] if len(sources) == 1 and sources[0] in ended else None
+    end = ended[clearer] if clearer else None
+    drops = {r: first(events) for r, events in sorted(timelines["layer"].items())}
+    out = {"clearer": clearer, "ended": end[0] if end else None,
+           "dropped": {r: d and d[0] for r, d in drops.items()}, "end_to_last_drop_s": None,
+           "end_to_last_drop_wall_s": None}
+    if end and drops and all(d is not None for d in drops.values()):
+        out["end_to_last_drop_s"] = max(d[0] for d in drops.values()) - end[0]
+        out["end_to_last_drop_wall_s"] = max(d[1] for d in drops.values()) - end[1]
+    return out
+
+
+def check_the_place(fleet, robot, uuid, timeout, receipts=None):
     """Sends robot to look_down, where its beams cover the removed block's place, and waits until no robot
     holds the obstacle any more. {"first_clear": sim time of robot's first update clearing cells of it,
     "deleted": {robot: sim time its handler deleted it}, "spread_s": last deletion - first clear,
-    "costmaps_free": {robot: whether its costmap is free at the obstacle's cells 1 s after the last deletion}}"""
+    "costmaps_free": {robot: whether its costmap is free at the obstacle's cells 1 s after the last deletion}},
+    and with `receipts` (a Receipts made before the share) end_to_last_drop's figures from the dispatch on,
+    under "receipts"."""
     import rospy
     from fleet_tests.scenario import ScenarioError, cell_centre
     sent = robot.send("look_down")
@@ -74,9 +181,14 @@ def check_the_place(fleet, robot, uuid, timeout):
     done = [t for t in deleted.values() if t is not None]
     if done:
         fleet.wait_until(lambda: rospy.get_time() >= max(done) + 1.0, 10.0, "1 s after the deletion")
-    return {"first_clear": clears[0] if clears else None, "deleted": deleted,
-            "spread_s": (max(done) - clears[0]) if clears and len(done) == len(deleted) else None,
-            "costmaps_free": {r.name: costmap_free_at(r.costmap, cells) for r in fleet.robots}}
+    out = {"first_clear": clears[0] if clears else None, "deleted": deleted,
+           "spread_s": (max(done) - clears[0]) if clears and len(done) == len(deleted) else None,
+           "costmaps_free": {r.name: costmap_free_at(r.costmap, cells) for r in fleet.robots}}
+    if receipts is not None:
+        names = [r.name for r in fleet.robots]
+        out["receipts"] = end_to_last_drop({node: {n: receipts.of(n, node, uuid) for n in names}
+                                            for node in ("handler", "layer")}, after=sent)
+    return out
 
 
 def main(argv=None):
@@ -97,6 +209,7 @@ def main(argv=None):
     rospy.init_node("bench_lifecycle_run")
     try:
         fleet = Fleet(2, facility=load_facility(rospy.get_param("/fleet/goals", None)))
+        receipts = Receipts([r.name for r in fleet.robots])
         fleet.wait_ready(180.0)
     except ScenarioError as err:
         print("lifecycle: %s" % err)
@@ -133,7 +246,7 @@ def main(argv=None):
     leader_result = leader.wait(max(1.0, leader_sent + args.goal_timeout - rospy.get_time()))
     verify = None
     if removed_at is not None and uuid:
-        verify = check_the_place(fleet, leader, uuid, args.goal_timeout)
+        verify = check_the_place(fleet, leader, uuid, args.goal_timeout, receipts)
     with fleet.lock:
         track = [(t, x, y) for t, x, y in follower.track if t >= follower_sent]
         messages = [(t, m.source, m.resolution, [cell_centre(m, i) for i in m.marked_indexes])
