@@ -461,3 +461,58 @@ def test_a_stalled_turn_is_escaped_the_other_way_without_a_controller_failure():
         now += 0.1
     assert escaped
     assert events == [Event.SUCCEEDED] and navigator.local_failures == 0
+
+
+# --- a robot wedged in a doorway (nav_willow under load, issue 28) -----------------------------------
+# Under CPU load the Willow robot came into the door at map (20.1, 27.9) at an angle and stood where the
+# roll-out of every command touched a lethal cell: the pursuit's turn in place (2·err, ~0 with the
+# robot already facing its target) did not move it, each stall escape was blocked and sent (0, 0),
+# which counted as valid control, so move_base's replans and recoveries never came and the robot
+# waited until the test's 300 s were over.
+
+def test_facing_its_target_with_the_way_ahead_blocked_the_robot_turns_no_slower_than_min_in_place():
+    cm, navigator = make()
+    pose = (2.0, 3.0, 0.0)
+    navigator.set_goal(4.0, 3.0, 0.0, 0.0)
+    assert Event.PLANNED in navigator.tick(0.0, pose).events
+    # a strip of lethal cells just ahead of the nose (radius 0.2 m), across the way: every forward
+    # command's roll-out touches it, the pose itself does not
+    cm.costs[int(2.5 / RES):int(3.5 / RES), int(2.25 / RES):int(2.35 / RES)] = 254
+    linear, angular = navigator._follow(pose)
+    assert navigator.last_command.startswith("turn in place")
+    assert linear == 0.0 and abs(angular) >= navigator.params.min_in_place_rotational_vel
+
+
+def never_free(pose, v, w, horizon=None):
+    """A pocket: every move touches an obstacle on the costmap."""
+    return v != 0.0 or w != 0.0
+
+
+def test_a_blocked_stall_escape_gives_way_to_a_free_one():
+    cm, navigator = make()
+    navigator.set_goal(1.0, 3.0, math.pi, 0.0)      # behind the robot: the pursuit turns in place
+    navigator._collides = lambda pose, v, w, horizon=None: v == 0.0 and w != 0.0   # only turning is blocked
+    pose, now = (3.0, 3.0, 0.0), 0.0
+    commands = []
+    while now < 2 * navigator.params.stall_time + 1.0:
+        step = navigator.tick(now, pose)             # the body does not move
+        commands.append((round(step.linear, 2), navigator.last_command))
+        now += 0.1
+    escapes = [c for c in commands if c[1].startswith("escape")]
+    assert escapes and escapes[0] == (0.15, "escape: creep forward (0.15 m/s, 0.00 rad/s)"), commands[-20:]
+
+
+def test_a_wedged_robot_ends_in_move_bases_recoveries_not_in_an_endless_wait():
+    cm, navigator = make()
+    navigator.set_goal(8.0, 1.3, 0.0, 0.0)
+    navigator._collides = never_free
+    pose, now, events, step = (2.0, 3.0, 0.3), 0.0, [], None
+    while now < 300.0 and Event.ABORTED not in events:
+        step = navigator.tick(now, pose)             # the body does not move
+        events += step.events
+        now += 0.1
+    assert Event.ABORTED in events, "still waiting after 300 s: %s" % navigator.last_command
+    assert step.reason == ABORT_TEXT[RecoveryTrigger.CONTROLLING]
+    assert events.count(Event.RECOVERY) == len(navigator.recovery_behaviours)
+    assert navigator.local_failures > 0
+    assert now < 120.0   # the stalls (1.5 s each) and controller_patience (15 s) per recovery, not 300 s

@@ -140,6 +140,7 @@ class Navigator:
         self.escapes = 0             # escapes from stalls so far (picks the next kind)
         self.escape_until = None
         self.escape_cmd = None
+        self.wedged_at = None        # pose where every escape was blocked (until the robot moves)
         self._reset_state(0.0)
 
     def _reset_state(self, now):
@@ -164,6 +165,7 @@ class Navigator:
         self.progress = 0
         self.escape_until = None
         self.stall_ref = None
+        self.wedged_at = None
         self.final_rotation = False
         self._reset_state(now)
 
@@ -316,9 +318,16 @@ class Navigator:
         command, failure = self._compute_velocity(now, pose)
         if command is not None:
             step.linear, step.angular = command
-            self.last_valid_control = now
-            if self.recovery_trigger is RecoveryTrigger.CONTROLLING:
-                self.recovery_index = 0
+            # Once every escape was blocked, a command counts as valid control only when the robot
+            # has moved since: a wedged robot's turn in place must neither hold off
+            # controller_patience nor start the recovery list again, or move_base's recoveries
+            # (and at the end the abort) would never come.
+            if self.wedged_at is not None and self._moved(self.wedged_at, pose):
+                self.wedged_at = None
+            if self.wedged_at is None:
+                self.last_valid_control = now
+                if self.recovery_trigger is RecoveryTrigger.CONTROLLING:
+                    self.recovery_index = 0
             self._watch_motion(now, pose, step.linear, step.angular)
             return
         self.local_failures += 1
@@ -345,7 +354,10 @@ class Navigator:
             bx, by = self.path_xy[blocked]
             return None, ("the plan is blocked at (%.2f, %.2f), %.2f m ahead" % (bx, by, math.hypot(bx - pose[0],
                                                                                                       by - pose[1])))
-        command = self._escape(now, pose) or self._follow(pose)
+        command = self._escape(now, pose)
+        if command is self.NO_ESCAPE:
+            return None, self.last_command
+        command = command or self._follow(pose)
         if command is None:
             return None, self.last_command
         return command, None
@@ -407,38 +419,71 @@ class Navigator:
 
     # Escapes, tried in turn on successive stalls: (linear, angular sign relative to the stalled turn).
     ESCAPES = (("turn the other way", 0.0, -1.0), ("creep forward", 0.15, 0.0), ("reverse", None, 0.0))
+    NO_ESCAPE = "no escape"       # _escape's answer when every escape would touch an obstacle
+
+    def _escape_command(self, index):
+        kind, lin, sign = self.ESCAPES[index % len(self.ESCAPES)]
+        lin = -abs(self.params.escape_vel) if lin is None else lin
+        ang = sign * math.copysign(min(1.0, self.params.max_rotational_vel), self.stall_turn or 1.0)
+        return kind, lin, ang
+
+    def _escape_horizon(self):
+        """An escape is slow and checked again every cycle: its roll-out covers the next two control
+        cycles (the time a command may stay in force when one cycle is late), not the pursuit's
+        collision_horizon, which at 0.1-0.15 m/s would refuse every move of a robot wedged within a
+        few centimetres of a door's cells."""
+        return min(self.params.collision_horizon, 2.0 / self.params.controller_frequency)
+
+    @staticmethod
+    def _moved(ref, pose):
+        """Whether pose is more than 2 cm or 0.05 rad from ref."""
+        return math.hypot(pose[0] - ref[0], pose[1] - ref[1]) > 0.02 or abs(_wrap(pose[2] - ref[2])) > 0.05
 
     def _watch_motion(self, now, pose, v, w):
         """Notices a stall: commands that move the robot, but for stall_time its pose did not change
         (the body touches something the footprint check on the costmap did not catch, e.g. a robot
         model larger than its configured footprint)."""
-        moved = self.stall_ref is None or (math.hypot(pose[0] - self.stall_ref[0], pose[1] - self.stall_ref[1]) > 0.02
-                                           or abs(_wrap(pose[2] - self.stall_ref[2])) > 0.05)
+        moved = self.stall_ref is None or self._moved(self.stall_ref, pose)
         if moved or (v == 0.0 and w == 0.0) or self.escape_until is not None:
             self.stall_ref, self.stall_since, self.stall_turn = pose, now, w
             return
         if now - self.stall_since < self.params.stall_time:
             return
-        kind, lin, sign = self.ESCAPES[self.escapes % len(self.ESCAPES)]
+        kind, lin, ang = self._escape_command(self.escapes)
         self.escapes += 1
-        lin = -abs(self.params.escape_vel) if lin is None else lin
-        ang = sign * math.copysign(min(1.0, self.params.max_rotational_vel), self.stall_turn or 1.0)
         self.escape_cmd = (kind, lin, ang)
         self.escape_until = now + self.params.stall_time
         LOG.info("stalled at (%.2f, %.2f) for %.1f s with %s; escape %d: %s for %.1f s", pose[0], pose[1],
                  now - self.stall_since, self.last_command, self.escapes, kind, self.params.stall_time)
 
     def _escape(self, now, pose):
-        """The escape command while one runs, then a replan; None when not escaping."""
+        """The escape command while one runs; None when not escaping; NO_ESCAPE when this escape and
+        every other one would touch an obstacle. A blocked escape gives way to the next one that is
+        free; with none free computeVelocityCommands fails (not a (0, 0) command, which would count as
+        valid control and keep a robot wedged in a doorway waiting without end), so that move_base's
+        state machine replans and, after controller_patience, runs its recoveries."""
         if self.escape_until is None:
             return None
         if now >= self.escape_until:
             self.escape_until = None
             self.stall_ref = None
             return None
+        horizon = self._escape_horizon()
         kind, lin, ang = self.escape_cmd
-        if self._collides(pose, lin, ang):
-            return 0.0, 0.0
+        if self._collides(pose, lin, ang, horizon):
+            for k in range(1, len(self.ESCAPES)):
+                candidate = self._escape_command(self.escapes - 1 + k)
+                if candidate[0] != kind and not self._collides(pose, candidate[1], candidate[2], horizon):
+                    kind, lin, ang = self.escape_cmd = candidate
+                    break
+            else:
+                self.escape_until = None
+                self.stall_ref = None
+                if self.wedged_at is None:
+                    self.wedged_at = pose
+                self.last_command = ("no command: a stall at (%.2f, %.2f), and turning the other way, creeping "
+                                     "forward and reversing would all touch an obstacle" % (pose[0], pose[1]))
+                return self.NO_ESCAPE
         self.last_command = "escape: %s (%.2f m/s, %.2f rad/s)" % (kind, lin, ang)
         return lin, ang
 
@@ -479,7 +524,11 @@ class Navigator:
                        key=lambda c: abs(c - w))
         candidates = [("follow", v, w)] if v == 0.0 else \
             [("follow" if c == w else "steer", lin, c) for lin in (v, min(v, 0.15)) for c in steer]
-        candidates += [("turn in place", 0.0, w), ("escape", -abs(self.params.escape_vel), 0.0)]
+        # base_local_planner turns in place no slower than min_in_place_vel_theta: a slower turn (the
+        # pursuit's 2·err when the robot already faces its target) does not move the robot, and the
+        # stall it causes is all that would be left.
+        turn = math.copysign(max(abs(w), min(wmax, self.params.min_in_place_rotational_vel)), w if w else 1.0)
+        candidates += [("turn in place", 0.0, turn), ("escape", -abs(self.params.escape_vel), 0.0)]
         for kind, cand_v, cand_w in candidates:
             # A turn in place is not held back by the outline check: it cannot take the centre
             # closer to anything, and a configured footprint larger than the body (the tutorials'
@@ -491,8 +540,9 @@ class Navigator:
         self.last_command = "no command: following (%.2f, %.2f), turning and reversing would all touch an obstacle" % (v, w)
         return None
 
-    def _collides(self, pose, v, w):
-        """Whether the footprint, driven at (v, w) for collision_horizon seconds, meets a lethal cell."""
+    def _collides(self, pose, v, w, horizon=None):
+        """Whether the footprint, driven at (v, w) for ``horizon`` seconds (collision_horizon by
+        default), meets a lethal cell."""
         if self._footprint_edge is None:
             pts = np.asarray(self.params.footprint_polygon, dtype=float)
             step = self.costmap.geometry.resolution / 2.0
@@ -505,7 +555,7 @@ class Navigator:
         costs = self.costmap.costs
         g = self.costmap.geometry
         x, y, yaw = pose
-        dt = self.params.collision_horizon / 4.0
+        dt = (self.params.collision_horizon if horizon is None else horizon) / 4.0
         # Step 0 is the pose itself: a robot already touching a lethal cell (a mark on its own
         # outline) is not held back by it, any command may take it out.
         for k in range(5):
