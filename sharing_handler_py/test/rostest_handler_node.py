@@ -316,6 +316,31 @@ class TestHandlerNode(unittest.TestCase):
         self.assertEqual(ext["cells"], [1001, 1002, 1003, 1500])
         os.unlink(path)
 
+    def test_10_a_flooding_sources_excess_is_dropped_counted_per_source_and_named(self):
+        """Issue 27, item 3 (max_obstacles_per_source 3 in handler_node.test): robot_7's new obstacles beyond
+        3 are dropped, counted on /diagnostics with robot_7 named, and logged once; robot_6's still go."""
+        bus = self.bus
+
+        def far(k, source, row):   # one cell, 1 m apart along x: nothing merges
+            col = 10 + 20 * k
+            x, y = OX + col * RES, OY + row * RES
+            return obstacle(uuid="00000000-0000-4000-8000-%012d" % (7000 + 100 * row + k), marked=(row * SX + col,),
+                            rect=(x, y, x + RES, y + RES), source=source, deadline=30)
+        for k in range(5):
+            bus.from_fleet.publish(far(k, "robot_7", 10))
+        wait_for(lambda: bus.counter("dropped_source_quota.robot_7") == 2,
+                 what="dropped_source_quota.robot_7 = 2 on /diagnostics")
+        self.assertEqual(bus.counter("dropped_source_quota"), 2)
+        floods = [far(k, "robot_7", 10).uuid for k in range(5)]
+        self.assertEqual([u in bus.listed() for u in floods], [True] * 3 + [False] * 2)
+        good = far(0, "robot_6", 30)
+        bus.from_fleet.publish(good)
+        wait_for(lambda: good.uuid in bus.listed(), what="robot_6's obstacle")
+        lines = [line for line in bus.rosout if "source_quota" in line]
+        self.assertEqual(len(lines), 1, lines)   # one line, not one per message
+        self.assertIn("robot_7", lines[0])
+        self.assertIn("max_obstacles_per_source 3", lines[0])
+
     def test_09_bad_parameter_fails_at_startup_naming_it(self):
         proc = subprocess.run([sys.executable, os.path.join(HERE, "..", "scripts", "sharing_handler"),
                                "__ns:=robot_5", "__name:=sharing_handler", "_obstacle_duration:=-5"],

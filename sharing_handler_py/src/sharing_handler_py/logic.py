@@ -43,6 +43,7 @@ renewal reaches at most arrival + obstacle_duration), a message that does not ma
 only bring the expiry closer (the earlier expiry is kept), a message beyond the extent, cell or
 version caps is dropped, and two obstacles whose union would exceed the caps are not merged.
 """
+import heapq
 import logging
 import math
 import uuid as uuidlib
@@ -52,6 +53,7 @@ from typing import Tuple
 from sharing_handler_py.authority import PeerPolicy
 from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
 from sharing_handler_py.nearby import RectangleIndex
+from sharing_handler_py.quotas import DropReport, SourceQuotas
 from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
                                            check_indexes, check_message_values, check_uuid)
 from sharing_msgs import obstacle_rules
@@ -83,6 +85,9 @@ DROP_REASONS = (
     "implausible_version",  # more than max_version_step beyond the highest version seen
     "stale_stamp",          # stamped longer ago than obstacle_duration + max_clock_skew
     "future_stamp",         # stamped more than max_clock_skew ahead of our clock
+    # issue 27, per-source quotas (quotas.py): counted per source too, logged once per 10 s
+    "source_quota",         # a new obstacle from a source already holding max_obstacles_per_source here
+    "source_rate",          # beyond the source's token bucket (source_update_rate, source_update_burst)
 )
 
 #: Counters besides the drops.
@@ -141,12 +146,13 @@ def _meta_key(obstacle):
 class _Entry:
     """Mutable state of one held obstacle."""
 
-    __slots__ = ("uuid", "source", "rectangle", "deadline", "geometry", "frame_id", "arrival",
-                 "expires_at", "first_key", "max_version", "stamps", "present", "sorted_cells")
+    __slots__ = ("uuid", "source", "owner", "rectangle", "deadline", "geometry", "frame_id", "arrival",
+                 "_expires", "_heap", "first_key", "max_version", "stamps", "present", "sorted_cells")
 
-    def __init__(self, obstacle, arrival):
+    def __init__(self, obstacle, arrival, heap=None):
         self.uuid = obstacle.uuid
         self.source = obstacle.source
+        self.owner = obstacle.source   # the source whose message made it here: its quota is charged
         self.rectangle = obstacle.rectangle
         self.deadline = obstacle.deadline
         self.geometry = obstacle.geometry
@@ -155,12 +161,26 @@ class _Entry:
         # Local expiry, a lease. Deadlines on the wire are remaining lifetimes aged to the moment
         # of sending: a renewal carries a full obstacle_duration, anything else what is left,
         # rounded down. The greatest arrival + deadline wins (see note_deadline).
+        # Every value it takes goes into the handler's deadline heap, so expiry need not look at
+        # every obstacle (items of values since replaced are skipped there).
+        self._heap = [] if heap is None else heap
+        self._expires = None
         self.expires_at = arrival + obstacle.deadline
         self.first_key = _meta_key(obstacle)
         self.max_version = obstacle.version
         self.stamps = {}          # cell -> (version, source) of the update that last set it
         self.present = set()      # cells currently marked
         self.sorted_cells = ()    # cache of sorted(present); None when stale
+
+    @property
+    def expires_at(self):
+        return self._expires
+
+    @expires_at.setter
+    def expires_at(self, value):
+        if value != self._expires:
+            self._expires = value
+            heapq.heappush(self._heap, (value, self.uuid))
 
     def apply(self, obstacle):
         """Applies one update by the stamp rule; returns True when anything visible changed."""
@@ -282,7 +302,8 @@ class SharingHandler:
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
                  max_deferred=10000, max_obstacle_extent=10.0, merge_distance=0.5,
-                 max_obstacle_cells=0, max_version_step=1000000, max_clock_skew=None):
+                 max_obstacle_cells=0, max_version_step=1000000, max_clock_skew=None,
+                 max_obstacles_per_source=1000, source_update_rate=100.0, source_update_burst=2000):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -313,7 +334,14 @@ class SharingHandler:
         self._nearby = RectangleIndex()  # uuid -> rectangle of every entry, for merging
         self._aliases = {}      # uuid of an absorbed obstacle -> uuid that absorbed it
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
+        self._deadlines = []    # heap of (expires_at, uuid), one item per value an entry's expiry took
+        self._tomb_heap = []    # heap of (until, uuid) of the tombstones
         self._deferred = []     # fleet messages waiting for a grid
+        # per-source quotas (issue 27): the robot itself is exempt (its own layer is no flood, and
+        # peers give its obstacles back after a restart)
+        self._quotas = SourceQuotas(max_obstacles_per_source, source_update_rate, source_update_burst,
+                                    exempt=(robot_name,))
+        self._quota_log = DropReport(robot_name, log=_log)
         self._counters = dict.fromkeys(EVENT_COUNTERS + tuple("dropped_" + r for r in DROP_REASONS), 0)
 
     # ----------------------------------------------------------------- queries
@@ -352,6 +380,14 @@ class SharingHandler:
 
     def is_tombstoned(self, uuid):
         return uuid in self._tombstones
+
+    def source_counters(self):
+        """Quota drops per source, {"dropped_source_quota.robot_9": n, ...}, for /diagnostics."""
+        return self._quota_log.counters()
+
+    def live_per_source(self):
+        """{source: obstacles held here that it created} (what max_obstacles_per_source bounds)."""
+        return dict(self._quotas.live)
 
     # ----------------------------------------------------------------- inputs
 
@@ -486,11 +522,16 @@ class SharingHandler:
                 _log.debug("%s: no grid yet; message %s v%d from %s waits for the map",
                            self.robot_name, obstacle.uuid, obstacle.version, obstacle.source)
                 return False
+            now = self._clock()
+            if not self._quotas.allow_update(obstacle.source, now):
+                return self._quota_drop(obstacle, "source_rate", now)
             self._check_grid(obstacle)
             if obstacle.uuid in self._aliases:
                 obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
             entry = self._entries.get(obstacle.uuid)
             self._check_authority(obstacle, entry)
+            if entry is None and not self._quotas.allow_new(obstacle.source):
+                return self._quota_drop(obstacle, "source_quota", now)
         except InvalidMessageError as err:
             self.reject(obstacle.source, obstacle.uuid, err)
             return False
@@ -502,8 +543,9 @@ class SharingHandler:
             obstacle = obstacle.replace(deadline=self._policy.cap_deadline(obstacle.deadline))
         shown = entry is not None and bool(entry.present)
         if entry is None:
-            entry = _Entry(obstacle, self._clock())
+            entry = _Entry(obstacle, self._clock(), self._deadlines)
             self._entries[obstacle.uuid] = entry
+            self._quotas.added(entry.owner)
             entry.apply(obstacle)
             changed = grown = True
             _log.info("%s: added obstacle %s from %s (v%d, %d cells, deadline %d s)", self.robot_name,
@@ -523,6 +565,8 @@ class SharingHandler:
             # Only an added obstacle or a grown rectangle can come within merge_distance of
             # another (rectangles never shrink), so most updates need no search at all.
             self._merge_around(obstacle.uuid)
+        if len(self._deadlines) > 4 * len(self._entries) + 1024:
+            self._compact_deadlines()   # renewals leave stale items; amortised O(1) per update
         return True
 
     def add_manual(self, rectangle, marked=(), deadline=0, frame_id=""):
@@ -614,18 +658,53 @@ class SharingHandler:
         """Removes every obstacle whose deadline has passed since its local arrival (no message
         goes to the fleet; the layer is told). Returns the expired uuids, sorted."""
         now = self._clock()
-        gone = sorted(u for u, e in self._entries.items() if now >= e.expires_at)
+        heap, entries, due = self._deadlines, self._entries, set()
+        while heap and heap[0][0] <= now:
+            _t, uuid = heapq.heappop(heap)
+            entry = entries.get(uuid)
+            if entry is not None and now >= entry.expires_at:   # else: gone, or its expiry moved since
+                due.add(uuid)
+        gone = sorted(due)
         for uuid in gone:
             entry = self._forget(uuid)
             self._counters["expired"] += 1
             _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
                       entry.expires_at - entry.arrival, entry.arrival)
             self._expired_out(uuid)
-        for uuid in [u for u, until in self._tombstones.items() if now >= until]:
-            del self._tombstones[uuid]
+        tombs = self._tomb_heap
+        while tombs and tombs[0][0] <= now:
+            until, uuid = heapq.heappop(tombs)
+            if self._tombstones.get(uuid) == until:
+                del self._tombstones[uuid]
+        if len(heap) > 4 * len(entries) + 64:
+            self._compact_deadlines()
+        self._quota_log.flush(now)
         if gone:
             self._on_change()
         return gone
+
+    def _compact_deadlines(self):
+        """Renewals leave items of replaced expiries in the heap: rebuilt from the entries, so it stays
+        O(obstacles)."""
+        self._deadlines[:] = [(e.expires_at, u) for u, e in self._entries.items()]
+        heapq.heapify(self._deadlines)
+
+    def _quota_drop(self, obstacle, reason, now):
+        """A message beyond its source's quota: counted (in all and per source), logged at most once
+        per 10 s per source and reason, state untouched. Returns False (not applied)."""
+        self._counters["dropped_" + reason] += 1
+        if reason == "source_quota":
+            hint = ("it already holds %d live obstacles here (max_obstacles_per_source %d); new obstacle %s "
+                    "refused. A robot sharing that many is faulty or hostile; raise ~max_obstacles_per_source "
+                    "only if the fleet needs it" % (self._quotas.live[obstacle.source], self._quotas.max_obstacles,
+                                                   obstacle.uuid[:40]))
+        else:
+            buckets = self._quotas.buckets
+            hint = ("over source_update_rate %g/s (burst %d); last: obstacle %s v%d. Check what floods from "
+                    "that robot, or raise ~source_update_rate / ~source_update_burst"
+                    % (buckets.rate, buckets.burst, obstacle.uuid[:40], obstacle.version))
+        self._quota_log.drop(obstacle.source, reason, now, hint)
+        return False
 
     def reject(self, source, uuid, error):
         """Drops a message: one log line naming the source robot and the reason, one counter."""
@@ -644,11 +723,14 @@ class SharingHandler:
         now = self._clock()
         entry = self._entries.pop(uuid)
         self._nearby.remove(uuid)
+        self._quotas.removed(entry.owner)
         until = now + max(self._policy.tombstone_time, entry.deadline)
         self._tombstones[uuid] = until
+        heapq.heappush(self._tomb_heap, (until, uuid))
         for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
             del self._aliases[alias]
             self._tombstones[alias] = until
+            heapq.heappush(self._tomb_heap, (until, alias))
         return entry
 
     def _note_shown(self, entry, shown, obstacle):
@@ -669,8 +751,9 @@ class SharingHandler:
         # stamp = when the share was made: the layer's detection time, or now (manual adds).
         shared = obstacle.replace(uuid=self._new_uuid(), version=1, source=self.robot_name,
                                   deadline=deadline, stamp=obstacle.stamp or self._clock())
-        entry = _Entry(shared, self._clock())
+        entry = _Entry(shared, self._clock(), self._deadlines)
         self._entries[shared.uuid] = entry
+        self._quotas.added(entry.owner)
         entry.apply(shared)
         self._nearby.put(shared.uuid, entry.rectangle)
         self._counters["authorised"] += 1
@@ -767,6 +850,7 @@ class SharingHandler:
     def _absorb(self, survivor_uuid, absorbed_uuid):
         survivor, absorbed = self._entries[survivor_uuid], self._entries.pop(absorbed_uuid)
         self._nearby.remove(absorbed_uuid)
+        self._quotas.removed(absorbed.owner)
         survivor.absorb(absorbed)
         self._nearby.put(survivor_uuid, survivor.rectangle)
         self._aliases[absorbed_uuid] = survivor_uuid

@@ -6,6 +6,7 @@ namespace except /diagnostics and the map topic. See the package README for the 
 import logging
 import sys
 import threading
+import time
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -96,6 +97,10 @@ def read_params():
         max_obstacle_cells=rospy.get_param("~max_obstacle_cells", 0),
         max_version_step=rospy.get_param("~max_version_step", 1000000),
         max_clock_skew=rospy.get_param("~max_clock_skew", 5.0),
+        max_obstacles_per_source=rospy.get_param("~max_obstacles_per_source", 1000),
+        source_update_rate=rospy.get_param("~source_update_rate", 100.0),
+        source_update_burst=rospy.get_param("~source_update_burst", 2000),
+        list_cost_share=rospy.get_param("~list_cost_share", 0.05),
     )
 
 
@@ -105,7 +110,13 @@ class HandlerNode:
     def __init__(self, params):
         self.params = params
         self._lock = threading.RLock()
-        self._changes = 0           # list changes since start (for the snapshot)
+        self._changes = 1           # list changes since start (for the snapshot; 1: the empty list)
+        # The latched list is the full state, O(obstacles) to build and send: after a list that took
+        # d s the next comes no sooner than d / list_cost_share s later (a change meanwhile is
+        # published then, by a timer), so with 10,000 obstacles held an update still costs the same.
+        self._list_due = 0.0        # time.monotonic() before which no list is built
+        self._list_timer = None     # pending trailing publication
+        self._source_reported = {}  # per-source quota counters at the last diagnostics
         self._snapshot_written = -1
         self._dropped_reported = 0
         self._map_frame = ""
@@ -129,13 +140,16 @@ class HandlerNode:
             on_to_layer=lambda o: self._deliver(self._pub_layer, o),
             on_to_fleet=lambda o: self._deliver(self._pub_fleet, o),
             on_expired=lambda u: self._pub_expired.publish(String(data=u)),
-            on_change=self._publish_list,
+            on_change=self._list_changed,
             max_cells_per_message=params.max_cells_per_message,
             max_obstacle_extent=params.max_obstacle_extent,
             merge_distance=params.merge_distance,
             max_obstacle_cells=params.max_obstacle_cells,
             max_version_step=params.max_version_step,
-            max_clock_skew=params.clock_skew)
+            max_clock_skew=params.clock_skew,
+            max_obstacles_per_source=params.max_obstacles_per_source,
+            source_update_rate=params.source_update_rate,
+            source_update_burst=params.source_update_burst)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
@@ -247,8 +261,26 @@ class HandlerNode:
 
     # ------------------------------------------------------------ outputs
 
-    def _publish_list(self):
+    def _list_changed(self):
+        """The handler's list changed (called with the lock held): publish now, or once the list's
+        cost share allows (a timer; every change is in the list published then)."""
         self._changes += 1
+        wait = self._list_due - time.monotonic()
+        if wait <= 0:
+            self._publish_list()
+        elif self._list_timer is None:
+            self._list_timer = threading.Timer(wait, self._publish_pending_list)
+            self._list_timer.daemon = True
+            self._list_timer.start()
+
+    def _publish_pending_list(self):
+        with self._lock:
+            self._list_timer = None
+            if not rospy.is_shutdown():
+                self._publish_list()
+
+    def _publish_list(self):
+        started = time.monotonic()
         now = rospy.Time.now()
         array = SharedObstacleArray()
         array.header.stamp = now
@@ -258,6 +290,8 @@ class HandlerNode:
         self._list_cache = fresh
         self._pub_list.publish(array)
         self._publish_markers()
+        finished = time.monotonic()
+        self._list_due = finished + (finished - started) / self.params.list_cost_share
 
     def _publish_markers(self):
         if self._pub_markers.get_num_connections() == 0 and self._changes > 1:
@@ -304,10 +338,20 @@ class HandlerNode:
             status.level = DiagnosticStatus.OK
             status.message = "%d obstacles held" % len(self.handler)
         self._dropped_reported = dropped
+        per_source = self.handler.source_counters()
+        new = sorted(((n - self._source_reported.get(k, 0), k) for k, n in per_source.items()
+                      if n > self._source_reported.get(k, 0)), reverse=True)
+        self._source_reported = per_source
+        if new and status.level != DiagnosticStatus.ERROR:
+            # who floods, and which limit: e.g. "robot_9: 3994 dropped_source_quota"
+            status.level = DiagnosticStatus.WARN
+            status.message += "; quota: " + ", ".join("%s: %d %s" % (k.split(".", 1)[1], n, k.split(".", 1)[0])
+                                                     for n, k in new[:3])
         status.values = [KeyValue(key="obstacles", value=str(len(self.handler))),
                          KeyValue(key="grid", value=str(self.handler.geometry or "unknown")),
                          KeyValue(key="dropped", value=str(dropped))]
         status.values += [KeyValue(key=k, value=str(v)) for k, v in sorted(counters.items())]
+        status.values += [KeyValue(key=k, value=str(v)) for k, v in sorted(per_source.items())]
         status.values += [KeyValue(key=k, value=str(v)) for k, v in sorted(delivery.items())]
         array = DiagnosticArray(status=[status])
         array.header.stamp = rospy.Time.now()

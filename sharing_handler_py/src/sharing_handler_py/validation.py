@@ -273,6 +273,11 @@ class HandlerParams:
     max_version_step: int = 1000000    # a version more than this beyond the highest seen is dropped
     max_clock_skew: float = 5.0        # s; stamps older than obstacle_duration + this or ahead by more
                                        # than this are dropped; -1 = stamps not checked
+    # issue 27, per-source quotas (quotas.py)
+    max_obstacles_per_source: int = 1000   # live obstacles one peer may hold here; new ones beyond are dropped
+    source_update_rate: float = 100.0      # messages per s per source (token bucket) ...
+    source_update_burst: int = 2000        # ... with this burst; the excess is dropped
+    list_cost_share: float = 0.05          # at most this share of time goes to rebuilding the latched list
 
     def __post_init__(self):
         def bad(name, why):
@@ -311,6 +316,16 @@ class HandlerParams:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
                 value == -1 or 0 <= value <= 3600):
             bad("max_clock_skew", "must be 0..3600 seconds, or -1 (stamps not checked)")
+        for name, low in (("max_obstacles_per_source", 1), ("source_update_burst", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                bad(name, "must be an integer >= %d" % low)
+        value = self.source_update_rate
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e9:
+            bad("source_update_rate", "must be a positive number of messages per second")
+        value = self.list_cost_share
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 1:
+            bad("list_cost_share", "must be in (0, 1]")
 
     @property
     def clock_skew(self):
