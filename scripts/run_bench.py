@@ -31,6 +31,9 @@ BENCHMARKS = {
     "fleet_scale": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_fleet_scale")],
                     "100 simulated robots on one mosquitto (latency to every peer, CPU, memory, bytes), "
                     "then two bridged brokers"),
+    "flood": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_flood")],
+              "one peer floods 5,000 valid new obstacles at 3 robots: p99 latency of another robot's obstacle, "
+              "handler cost per update with 10,000 vs 10 held"),
     "sim": ([sys.executable, os.path.join(ROOT, "fleet_sim", "scripts", "bench_sim")],
             "simulator: real-time factor for 2 and 20 robots"),
     "nav": ([sys.executable, os.path.join(ROOT, "fleet_nav", "scripts", "bench_nav")],

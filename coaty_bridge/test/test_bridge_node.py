@@ -87,9 +87,12 @@ def test_bad_parameter_fails_at_start_up_naming_it(ros_graph, param, shown):
 
 
 def test_run_broker_publishes_its_url_and_bridges_wait_for_it(ros_graph, observer_factory, wait_for):
+    """With the opt-out (~insecure): the anonymous observer can see robot_3. The secure default is
+    test_secure_default.py."""
     env = ros_graph.env
     broker = subprocess.Popen([sys.executable, os.path.join(ros_graph.PKG, "scripts", "run_broker"),
-                               "__name:=broker", "_port:=0"], env=env, stdout=subprocess.PIPE, text=True)
+                               "__name:=broker", "_port:=0", "_insecure:=true"], env=env, stdout=subprocess.PIPE,
+                              text=True)
     ros_graph.nodes.append(broker)
     node = ros_graph.bridge("robot_3", "broker_url_param:=/fleet/broker_url", "broker_wait:=20.0",
                             "subscriber_wait:=0.0")

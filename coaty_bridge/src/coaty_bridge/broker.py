@@ -42,10 +42,13 @@ class Broker:
 
     ``port`` 0 picks a free port. ``extra_config`` lines are appended to the
     listener block (e.g. TLS: ``cafile ...``, ``certfile ...``, ``keyfile ...``).
+    ``setup(directory)``, if given, is called with the broker's private directory before the
+    config is written and returns more config lines (e.g. ``FleetCredentials.broker_config``,
+    which writes the password file and ACL there).
     """
 
     def __init__(self, port=0, host="127.0.0.1", binary=MOSQUITTO, extra_config=(),
-                 allow_anonymous=True, start_timeout=10.0):
+                 allow_anonymous=True, start_timeout=10.0, setup=None):
         self.host = host
         self.requested_port = port
         self.port = None
@@ -53,6 +56,7 @@ class Broker:
         self.extra_config = list(extra_config)
         self.allow_anonymous = allow_anonymous
         self.start_timeout = start_timeout
+        self.setup = setup
         self._proc = None
         self._dir = None
 
@@ -73,6 +77,13 @@ class Broker:
         if not os.access(self.binary, os.X_OK):
             raise BrokerError("%s not found (apt-get install mosquitto)" % self.binary)
         self._dir = tempfile.mkdtemp(prefix="coaty_broker_")
+        extra = list(self.extra_config)
+        if self.setup is not None:
+            try:
+                extra += list(self.setup(self._dir))
+            except Exception:
+                self.stop()
+                raise
         attempts = 1 if self.requested_port else 5
         last = ""
         for _ in range(attempts):  # a free port can be taken between probe and bind
@@ -90,7 +101,7 @@ class Broker:
                           "listener %d %s\n"
                           % (self.log_path, _keep_user(), "true" if self.allow_anonymous else "false",
                              self.port, self.host))
-                for line in self.extra_config:
+                for line in extra:
                     out.write(line + "\n")
             self._proc = subprocess.Popen([self.binary, "-c", conf], stdin=subprocess.DEVNULL,
                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

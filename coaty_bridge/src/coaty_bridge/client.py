@@ -11,6 +11,7 @@ and counted; the MQTT thread never sees an exception.
 import collections
 import json
 import logging
+import select
 import socket
 import secrets
 import ssl
@@ -25,8 +26,11 @@ from coaty_bridge import codec, footprint as footprints, lifetimes
 from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError,
                                  WrongTypeError)
 from coaty_bridge.liveness import CHANNEL as HEARTBEAT_CHANNEL, OBJECT_TYPE as HEARTBEAT_OBJECT_TYPE, Liveness
+from coaty_bridge.fairness import FairQueue
 from coaty_bridge.identity import identity_for
+from coaty_bridge.security import is_loopback
 from coaty_bridge.topics import Topic, check_name, check_uuid, new_uuid, parse_topic, subscription
+from sharing_handler_py.quotas import DropReport, TokenBuckets
 
 LOG = logging.getLogger(__name__)
 
@@ -86,11 +90,21 @@ class BridgeConfig:
     # one 52-byte Discover costs every bridge one Resolve per obstacle held (issue 27, attack 4)
     discover_answer_rate: float = 1.0
     discover_answer_burst: int = 3
+    # Per sender (MQTT sourceId; issue 27, item 3): obstacle Advertises beyond a token bucket of this
+    # many per s with this burst are dropped before their payload is parsed, and what is left waits
+    # in a queue per sender (at most source_queue_size), served round-robin, so one sender's flood
+    # does not delay another's obstacles (fairness.py)
+    source_message_rate: float = 100.0
+    source_message_burst: int = 1000
+    source_queue_size: int = 1000
     # s: end-to-end liveness (liveness.py): a heartbeat this often, and WARN/ERROR when our own
     # heartbeat is not echoed or a peer's not heard for liveness_timeout s (issue 27, attack 6)
     heartbeat_interval: float = 1.0
     liveness_timeout: float = 3.0
     authenticate_sources: bool = False
+    # true: plain mqtt:// to a broker that is not on this machine is allowed (logins and obstacles
+    # then cross the network in clear text); false refuses it at start-up (issue 27, item 9)
+    insecure: bool = False
     # metres; fleet-wide. Adverts go out per square of the map and each bridge hears the 3 x 3
     # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet.
     footprint_area_size: float = 10.0
@@ -142,6 +156,12 @@ class BridgeConfig:
             object.__setattr__(self, "address", parse_broker_url(self.broker_url))
         except ValueError as err:
             fail("broker_url", err)
+        if not isinstance(self.insecure, bool):
+            fail("insecure", "must be true or false")
+        if not self.use_tls and not is_loopback(self.address.host) and not self.insecure:
+            fail("broker_url", "plain MQTT to %s, which is not this machine: the login and every obstacle would "
+                               "cross the network in clear text; use mqtts:// (tls_ca, and tls_cert/tls_key or a "
+                               "password), or set insecure: true to accept the risk" % self.address.host)
         for name in ("tls_ca", "tls_cert", "tls_key", "username", "password"):
             if not isinstance(getattr(self, name), str):
                 fail(name, "not a string")
@@ -164,6 +184,13 @@ class BridgeConfig:
         if isinstance(self.discover_answer_burst, bool) or not isinstance(self.discover_answer_burst, int) \
                 or not 1 <= self.discover_answer_burst <= 1000:
             fail("discover_answer_burst", "must be an integer 1..1000")
+        rate = self.source_message_rate
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate < 1e9:
+            fail("source_message_rate", "must be a positive number of messages per second")
+        for name in ("source_message_burst", "source_queue_size"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 10 ** 7:
+                fail(name, "must be an integer 1..10000000")
         for name in ("reconnect_min_delay", "reconnect_max_delay", "discover_window", "broker_warn_interval",
                      "discover_answer_rate", "heartbeat_interval", "liveness_timeout"):
             value = getattr(self, name)
@@ -295,6 +322,15 @@ class CoatyBridgeClient:
         self._own_log = collections.OrderedDict()
         self._pending_discovers = {}
         self._discover_buckets = {}  # requester sourceId -> (tokens, last refill), see _discover_allowed
+        # what paho reads goes into a queue per sourceId, served round-robin by one worker (fairness.py);
+        # obstacle Advertises beyond a sender's token bucket are dropped before they queue
+        self._inbox = FairQueue(config.source_queue_size)
+        self._source_buckets = TokenBuckets(config.source_message_rate, config.source_message_burst)
+        self._source_drops = DropReport(config.robot_name, log=LOG)
+        self._source_drops_lock = threading.Lock()
+        self._inbox_thread = None
+        self._admit_cache = {}   # topic text -> (sender key, rate-limited kind), see admit
+        self._robot_of = {}   # sourceId -> robot name, from heartbeats (for log lines a person can act on)
         self._connected = False
         self._ever_connected = False
         self._stopping = False
@@ -338,7 +374,7 @@ class CoatyBridgeClient:
         self._mqtt.on_connect = self._on_connect
         self._mqtt.on_disconnect = self._on_disconnect
         self._mqtt.on_connect_fail = self._on_connect_fail
-        self._mqtt.on_message = self.on_message
+        self._mqtt.on_message = self._on_mqtt_message
 
     # ------------------------------------------------------------ lifecycle
 
@@ -348,6 +384,8 @@ class CoatyBridgeClient:
         with self._lock:
             self._down_since = self._clock()
         self._mqtt.connect_async(address.host, address.port, keepalive=self.config.keepalive)
+        self._inbox_thread = threading.Thread(target=self._serve_inbox, name="coaty_bridge inbox", daemon=True)
+        self._inbox_thread.start()
         self._mqtt.loop_start()
         # check_broker on a wall-clock second: the MQTT thread sleeps in its backoff, and ROS time may stand
         self._watch_thread = threading.Thread(target=self._watch_broker, name="coaty_bridge broker watch",
@@ -389,6 +427,8 @@ class CoatyBridgeClient:
                 or not isinstance(hears, list) or not all(isinstance(h, str) for h in hears) or len(hears) > 10000:
             raise WrongTypeError("heartbeat fields robot %r, seq %r, hears: wrong types" % (str(robot)[:40], seq))
         check_name(robot, "heartbeat robot")
+        if len(self._robot_of) < 4096 or topic.source_id in self._robot_of:
+            self._robot_of[topic.source_id] = robot
         if topic.source_id == self.identity_id:
             self.liveness.own_echo(seq)
             return
@@ -408,6 +448,8 @@ class CoatyBridgeClient:
     def _watch_broker(self):
         while not self._watch_stop.wait(1.0):
             try:
+                with self._source_drops_lock:
+                    self._source_drops.flush(self._clock())
                 self.check_broker()
             except Exception as err:  # noqa: BLE001 - a log problem must not end the watch
                 LOG.error("%s: broker watch: %s: %s", self.config.robot_name, type(err).__name__, err)
@@ -453,6 +495,7 @@ class CoatyBridgeClient:
                 LOG.warning("%s: could not deadvertise before disconnecting: %s", self.config.robot_name, err)
         self._mqtt.disconnect()
         self._mqtt.loop_stop()
+        self._inbox.close()
 
     def kill(self):
         """Drops the connection without a Deadvertise, as a crash would (tests only):
@@ -461,6 +504,7 @@ class CoatyBridgeClient:
         self._watch_stop.set()
         sock = self._mqtt.socket()
         self._mqtt.loop_stop()
+        self._inbox.close()
         if sock is not None:
             sock.close()
 
@@ -477,6 +521,10 @@ class CoatyBridgeClient:
         with self._lock:
             snapshot = dict(self._counters)
             snapshot["queue_length"] = len(self._queue)
+            snapshot["inbox_length"] = len(self._inbox)
+        with self._source_drops_lock:
+            # dropped_source_rate_limited.<robot@sourceId> / dropped_source_queue_full.<...>
+            snapshot.update(self._source_drops.counters())
         return snapshot
 
     def _count(self, key, n=1):
@@ -692,8 +740,90 @@ class CoatyBridgeClient:
             LOG.warning("%s: lost the broker %s (rc %s); reconnecting with backoff",
                         self.config.robot_name, self.config.broker_url, rc)
 
+    def _on_mqtt_message(self, client, userdata, message):
+        """paho's on_message (its network thread): only sorts the raw message into its sender's queue
+        (fair delivery); obstacle Advertises beyond the sender's token bucket are dropped here, before
+        their payload is parsed. The worker (_serve_inbox) does the rest. Never raises."""
+        try:
+            topic_text, payload = message.topic, message.payload
+            key = self.admit(topic_text)
+            if key is not None and not self._inbox.put(key, (topic_text, payload)):
+                self._source_drop(key, "source_queue_full", topic_text,
+                                  "its queue holds source_queue_size %d messages not yet handed over"
+                                  % self.config.source_queue_size)
+        except Exception as err:  # a bug must not kill the MQTT thread
+            self._count("dropped.internal_error")
+            LOG.error("%s: internal error on %r: %s: %s", self.config.robot_name,
+                      str(getattr(message, "topic", "?"))[:120], type(err).__name__, err)
+
+    def admit(self, topic_text):
+        """The queue key (sender sourceId) of a message read from MQTT, or None when the sender's
+        token bucket drops it (obstacle Advertises only: the costly ones; our own Resolves, heartbeats
+        and footprints are not limited here). A topic that does not parse is queued under "" and
+        counted by handle()."""
+        known = self._admit_cache.get(topic_text)
+        if known is None:
+            try:
+                topic = parse_topic(topic_text)
+            except CoatyError:
+                return ""
+            key = topic.source_id or ""
+            limited = topic.event == "ADV" and topic.object_type == self.config.object_type \
+                and key != self.identity_id
+            if len(self._admit_cache) >= 4096:
+                self._admit_cache.clear()
+            known = self._admit_cache[topic_text] = (key, limited)   # a flood repeats one topic
+        key, limited = known
+        if limited and not self._source_buckets.allow(key, self._clock()):
+            self._source_drop(key, "source_rate_limited", topic_text,
+                              "over source_message_rate %g/s (burst %d)"
+                              % (self.config.source_message_rate, self.config.source_message_burst))
+            return None
+        return key
+
+    def _source_drop(self, key, reason, topic_text, hint):
+        self._count("dropped." + reason)
+        robot = self._robot_of.get(key)
+        label = "%s@%s" % (robot, key[:8]) if robot else key   # robot (sourceId) when its heartbeat told us
+        with self._source_drops_lock:
+            self._source_drops.drop(label, reason, self._clock(), "%s, last on %s" % (hint, str(topic_text)[:120]))
+
+    def _serve_inbox(self):
+        while not self.serve_one(timeout=1.0):
+            pass
+
+    def serve_one(self, timeout=None):
+        """Hands the next message of the inbox (round-robin over senders) to handle(). Returns True
+        once the inbox is closed and empty (the worker ends)."""
+        item = self._inbox.get(timeout=timeout)
+        if item is None:
+            return self._stopping or self._killed
+        _key, (topic_text, payload) = item
+        try:
+            self.handle(topic_text, payload)
+        except Exception as err:  # a bug must not end delivery
+            self._count("dropped.internal_error")
+            LOG.error("%s: internal error on %r: %s: %s", self.config.robot_name, str(topic_text)[:120],
+                      type(err).__name__, err)
+        # Let paho's thread read on: holding the GIL until Python's switch interval (5 ms) forced it
+        # out, this busy worker let paho read about one message per 5 ms, and yielding only per
+        # message about one per message handled, so another sender's message sat unread in the
+        # socket behind a flood (bench_flood: p99 1.2 s, then 0.8 s). While the socket has unread
+        # data, paho gets a moment to read (and drop the excess) before the next message is handled.
+        time.sleep(0.0005 if self._unread() else 0)
+        return False
+
+    def _unread(self):
+        sock = self._mqtt.socket()
+        if sock is None:
+            return False
+        try:
+            return bool(select.select([sock], [], [], 0)[0])
+        except (OSError, ValueError):
+            return False
+
     def on_message(self, client, userdata, message):
-        """paho on_message: the boundary. Never raises."""
+        """Handles one message at once (the synchronous boundary, for tests). Never raises."""
         try:
             self.handle(message.topic, message.payload)
         except Exception as err:  # a bug must not kill the MQTT thread

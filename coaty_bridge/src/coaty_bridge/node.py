@@ -8,6 +8,7 @@
     /diagnostics                            <- counters, once a second
 """
 import logging
+import os
 import sys
 import threading
 
@@ -22,6 +23,7 @@ from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_u
 from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
+from coaty_bridge.security import read_password_file
 from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue, centroid, moved
 
 LOG = logging.getLogger(__name__)
@@ -32,7 +34,7 @@ _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "i
            "offline_queue_size", "max_obstacle_extent", "max_obstacle_cells", "compact_indexes", "keepalive", "reconnect_min_delay",
            "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "authenticate_sources", "footprint_area_size",
            "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
-           "liveness_timeout")
+           "liveness_timeout", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")
 
 
 def msg_to_update(msg):
@@ -159,6 +161,21 @@ def read_config():
                          "namespace; run it as robot_N/coaty_bridge or set ~robot_name")
     if choice.warning:
         rospy.logwarn("%s: coaty_bridge: %s", robot_name, choice.warning)
+    password_file = rospy.get_param("~password_file", "")
+    if password_file:
+        # read once the broker is up: run_broker makes the secret on first use before it sets the URL
+        if not isinstance(password_file, str):
+            raise ValueError("parameter password_file = %r: must be a file name" % (password_file,))
+        if kwargs.get("password"):
+            raise ValueError("parameter password_file = %r: set either password or password_file" % (password_file,))
+        # a URL left on the master by an earlier launch can come before run_broker made the secret
+        deadline = rospy.get_time() + (broker_wait if isinstance(broker_wait, (int, float)) else 0)
+        while not os.path.exists(password_file) and rospy.get_time() < deadline and not rospy.is_shutdown():
+            rospy.sleep(0.1)
+        try:
+            kwargs["password"] = read_password_file(password_file)
+        except ValueError as err:
+            raise ValueError("parameter %s" % err) from None
     try:
         config = BridgeConfig(robot_name=robot_name, broker_url=choice.url, broker_url_source=choice.source,
                               **kwargs)
@@ -192,6 +209,7 @@ class BridgeNode:
         self.footprint_config = footprint_config or FootprintConfig()
         self._lock = threading.Lock()
         self._counters = {}
+        self._sender_drops_reported = {}   # per-sender drop counters at the last diagnostics
         self._own_footprint = None   # (RobotFootprint, ROS time it arrived)
         self._advertised = None      # (centroid, ROS time) of the last own advert sent
         self._stale_logged = False
@@ -220,9 +238,17 @@ class BridgeNode:
         if self.from_fleet.get_num_connections() == 0:
             rospy.logwarn("%s: nobody subscribes from_fleet after %.1f s; connecting anyway",
                           self.config.robot_name, subscriber_wait)
-        rospy.loginfo("%s: coaty_bridge agent %s, broker %s (from %s), namespace %s, objectType %s",
+        rospy.loginfo("%s: coaty_bridge agent %s, broker %s (from %s), namespace %s, objectType %s, "
+                      "MQTT client id %s, login %s%s",
                       self.config.robot_name, self.client.identity_id, self.config.broker_url,
-                      self.config.broker_url_source, self.config.namespace, self.config.object_type)
+                      self.config.broker_url_source, self.config.namespace, self.config.object_type,
+                      self.client.client_id, self.config.username or "anonymous",
+                      ", authenticated sources" if self.config.authenticate_sources else "")
+        if self.config.insecure:
+            rospy.logwarn("%s: coaty_bridge: INSECURE (insecure:=true)%s: %s", self.config.robot_name,
+                          "" if self.config.authenticate_sources else ", authenticate_sources off",
+                          "obstacles under any robot's name are taken from anyone on the broker, and a broker "
+                          "that is not on this machine may be reached without TLS")
         self.client.start()
 
     def shutdown(self):
@@ -347,6 +373,16 @@ class BridgeNode:
             age = max(0.0, rospy.get_time() - stamp.to_sec())
         return self.client.clock() - age
 
+    def _new_source_drops(self, counters):
+        """'robot_9@1a2b3c4d: 3785 dropped_source_rate_limited' for the senders whose excess was dropped
+        since the last report (issue 27, item 3), the three largest; "" when none."""
+        per_sender = {k: n for k, n in counters.items() if k.startswith(("dropped_source_rate_limited.",
+                                                                      "dropped_source_queue_full."))}
+        last = self._sender_drops_reported
+        self._sender_drops_reported = per_sender
+        new = sorted(((n - last.get(k, 0), k) for k, n in per_sender.items() if n > last.get(k, 0)), reverse=True)
+        return ", ".join("%s: %d %s" % (k.split(".", 1)[1], n, k.split(".", 1)[0]) for n, k in new[:3])
+
     def _publish_diagnostics(self, _event=None):
         counters = self.client.counters()
         with self._lock:
@@ -361,12 +397,17 @@ class BridgeNode:
         counters["delivered"] = self.from_fleet.delivered
         counters["publishers_repaired"] = self.from_fleet.repaired
         counters["publishers_recreated"] = self.from_fleet.recreated
+        flood = self._new_source_drops(counters)
         if level == safe_publisher.ERROR:
             status.level = DiagnosticStatus.ERROR
             status.message = problem
         elif level == safe_publisher.WARN:
             status.level = DiagnosticStatus.WARN
             status.message = problem
+        elif flood:
+            # a flooding sender (issue 27, item 3): name it and the limit
+            status.level = DiagnosticStatus.WARN
+            status.message = "dropping a sender's excess: " + flood
         elif self.client.connected:
             # connected is not enough (issue 27, attack 6): do heartbeats cross the bus?
             live, reason = self.client.liveness.status()

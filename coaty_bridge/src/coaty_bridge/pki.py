@@ -31,6 +31,7 @@ def _run(args, cwd):
 
 def make_ca(directory, name="fleet-ca", days=3650):
     """A self-signed CA in `directory` (ca.key, ca.crt)."""
+    directory = os.path.abspath(directory)   # openssl runs in `directory`: relative paths would point below it
     os.makedirs(directory, exist_ok=True)
     key, cert = os.path.join(directory, "ca.key"), os.path.join(directory, "ca.crt")
     _run(["req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", cert, "-days", str(days),
@@ -43,6 +44,8 @@ def make_ca(directory, name="fleet-ca", days=3650):
 def make_cert(ca, directory, common_name, ip=None, dns=None, days=825):
     """A certificate signed by `ca` with CN `common_name` (a robot: its identity id; the
     broker: its host name), with subjectAltName IP/DNS for a server. Files <CN>.key/.crt."""
+    directory = os.path.abspath(directory)
+    ca = Credentials(os.path.abspath(ca.cert), os.path.abspath(ca.key))
     os.makedirs(directory, exist_ok=True)
     base = os.path.join(directory, common_name.replace("/", "_"))
     key, csr, cert, ext = base + ".key", base + ".csr", base + ".crt", base + ".ext"

@@ -258,7 +258,7 @@ def main(argv=None):
     counters, base = None, None
     if sharing:
         try:
-            counters = BrokerCounters(rospy.get_param("/fleet/broker_url"))
+            counters = BrokerCounters(rospy.get_param("/fleet/broker_url"), rospy.get_param("/fleet/broker_monitor", None))
             base = counters.next_sample(time.time())
         except (KeyError, OSError, ScenarioError) as err:
             print("bench: broker byte counters: %s" % err)

@@ -408,7 +408,9 @@ class BrokerCounters:
     SENT = "$SYS/broker/bytes/sent"
     RECEIVED = "$SYS/broker/bytes/received"
 
-    def __init__(self, url):
+    def __init__(self, url, monitor=None):
+        """``monitor``: run_broker's /fleet/broker_monitor ({username, password_file}), the read-only
+        login of the secure default (an anonymous client is refused there)."""
         import paho.mqtt.client as mqtt
         parts = urllib.parse.urlparse(url)
         self.cond = threading.Condition()
@@ -417,6 +419,9 @@ class BrokerCounters:
         self.own = []        # (wall time, bytes) of every message this client received
         self.client = mqtt.Client(client_id="bench_sys_%d" % os.getpid(), clean_session=True)
         self.client.on_message = self._on_message
+        if monitor:
+            from coaty_bridge.security import read_password_file
+            self.client.username_pw_set(monitor["username"], read_password_file(monitor["password_file"]))
         self.client.connect(parts.hostname, parts.port or 1883, keepalive=60)
         self.client.subscribe([(self.SENT, 0), (self.RECEIVED, 0)])
         self.client.loop_start()
