@@ -34,7 +34,6 @@ def test_attack_4_a_few_bytes_declaring_a_million_cells_are_not_expanded(fleet, 
     robots = [fleet.join("robot_0"), fleet.join("robot_1")]
     good = _share_good(fleet, wait_for)
     before = [r.held() for r in robots]
-    received = [_bridge_counter(r, "received") for r in robots]
     # the issue's message: 10^6 cells on a made-up 1000 x 1000 grid, compact: under 2 kB
     bomb = evil(fleet.clock, size_x=1000, size_y=1000, marked=tuple(range(10 ** 6)))
     obj = codec.obstacle_to_object(bomb, OT)
@@ -42,14 +41,17 @@ def test_attack_4_a_few_bytes_declaring_a_million_cells_are_not_expanded(fleet, 
     assert len(payload) < 2500
     observer.publish(str(Topic("fleet", "ADV", ATTACKER, object_type=OT)), payload)
     # a whole-map rectangle is refused by the bridge as well (before its indexes are read)
-    _attack(observer, evil(fleet.clock, uuid=str(uuidlib.uuid4()), rectangle=(-10.0, -5.0, 10.0, 5.0)))
+    whole_map = evil(fleet.clock, uuid=str(uuidlib.uuid4()), rectangle=(-10.0, -5.0, 10.0, 5.0))
+    _attack(observer, whole_map)
     for robot in robots:
         wait_for(lambda: _bridge_counter(robot, "dropped.too_many_obstacle_cells") >= 1,
                  what="%s's bridge drops the 10^6 cells before expanding them" % robot.name)
         wait_for(lambda: _bridge_counter(robot, "dropped.oversized_rectangle") >= 1,
                  what="%s's bridge drops the whole-map rectangle" % robot.name)
-    # nothing of either reached a handler
-    assert [_bridge_counter(r, "received") for r in robots] == received
+    # nothing of either reached a handler. (Not "the bridges' received counters did not move": since
+    # delivery is fair per sender, a late Resolve of the good obstacle may still be counted here.)
+    for robot in robots:
+        assert bomb.uuid not in robot.held() and whole_map.uuid not in robot.held()
     for robot, held in zip(robots, before):
         now = robot.held()
         assert {u: now[u] for u in good} == {u: held[u] for u in good}, "a good obstacle was lost or changed"
