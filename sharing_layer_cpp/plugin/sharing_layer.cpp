@@ -629,7 +629,10 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
     default:
       break;
   }
-  core_->drawShared(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY());
+  // Inside the window only (the layer contract): shared obstacles outside it are still in the master from the cycles
+  // that drew them, and one that changes grows the bounds over itself (takeDirtyBounds in updateBounds).
+  core_->drawShared(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY(), min_i,
+                    min_j, max_i, max_j);
 }
 
 void SharingLayer::clearArea(int start_x, int start_y, int end_x, int end_y, bool invert_area)
