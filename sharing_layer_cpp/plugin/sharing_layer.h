@@ -72,6 +72,11 @@ public:
   LayerParams sharingParams();
   /// @brief robot_exclusion_margin and robot_timeout in use.
   FleetRobotParams fleetRobotParams();
+  /// @brief Whether the layer left "waiting for the map" (/diagnostics' "map received": the static layer's map read
+  /// from the master) and, when a map_topic is set, a map arrived on it.
+  bool mapReceived();
+  /// @brief Poses of the plan the plan trigger follows (0: none).
+  std::size_t planPoses();
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
