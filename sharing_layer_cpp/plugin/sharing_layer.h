@@ -23,6 +23,7 @@
 
 #include <sharing_layer_cpp/SharingLayerConfig.h>
 
+#include "sharing_layer/bit_grid.h"
 #include "sharing_layer/sharing_core.h"
 #include "layer_config.h"
 
@@ -129,7 +130,14 @@ private:
   bool stuck_pending_ = false;
   bool inscribed_from_footprint_ = true;  ///< ~inscribed_radius not set: follow the footprint
   TriggerSource stuck_source_ = TriggerSource::StuckFeedback;
-  nav_msgs::OccupancyGrid::ConstPtr map_;  ///< last a-priori map, for its unknown cells
+  /// The last a-priori map's unknown (-1) cells, a bit per map cell, and where they lie (re-applied to a new or moved
+  /// core). Not the message: its byte per cell stayed with the layer for the map's lifetime (issue 29).
+  struct UnknownMap
+  {
+    nav_msgs::MapMetaData info;
+    BitGrid unknown;
+  };
+  std::unique_ptr<UnknownMap> map_;
   FleetRobotParams fleet_params_;          ///< robot_exclusion_margin, robot_timeout
   sharing_msgs::RobotFootprintArray::ConstPtr fleet_robots_;  ///< last fleet_robots, re-applied to a new core
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
