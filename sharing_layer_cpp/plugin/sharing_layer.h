@@ -151,11 +151,14 @@ private:
   /// marking-only ones. @return false when a source is not current (ObstacleLayer's current_)
   struct SourceObservation
   {
-    costmap_2d::Observation observation;
+    const costmap_2d::Observation* observation;  ///< in cycle_observations_ or ObstacleLayer's static ones
     ScanLimits limits;
     std::string source;  ///< its name in observation_sources, for logs
   };
   bool sourceObservations(std::vector<SourceObservation>& out);
+  /// This cycle's observations, per buffer, filled in place (costmap_2d::Observation copies its whole cloud and has no
+  /// move: each copy avoided is a cloud's allocation and copy per cycle).
+  std::vector<std::vector<costmap_2d::Observation>> cycle_observations_;
   /// @brief One observation through the core: its monitoring updates published, the plan trigger checked, the
   /// bounds grown by what it touched; core_mutex_ held.
   void processObservation(const SourceObservation& source_observation, double now, double robot_x, double robot_y,
