@@ -25,7 +25,8 @@ constexpr double kPi = 3.14159265358979323846;
 struct Scene
 {
   GridGeometry geometry{ 0.05, 0.0, 0.0, 2000, 2000 };
-  std::vector<std::uint8_t> walls;
+  std::vector<std::uint8_t> walls;                ///< what the scan is raycast against: the map and the crates
+  std::vector<std::uint8_t> map;                  ///< the a-priori map: walls, racks, pillars (no crates)
   std::vector<std::pair<double, double>> crates;  ///< lower-left corners of 0.4 m crates, not on the map
   Observation scan;
 };
@@ -60,6 +61,7 @@ inline Scene makeScene()
   }
   fillRect(s, 51.5, 51.0, 51.9, 51.4);
   fillRect(s, 48.0, 48.6, 48.4, 49.0);
+  s.map = s.walls;
   // Crates strewn over the hall: the obstacles the fleet shares. They stand in every configuration,
   // so all of them scan the same world; they differ only in how many crates are shared obstacles.
   std::mt19937 placement(42);

@@ -26,8 +26,19 @@ void SharingLayer::mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg)
              params_.robot_name.c_str(), msg->info.width, msg->info.height, msg->data.size(), msg->info.resolution);
     return;
   }
+  // Only its unknown cells are needed, a bit each: the message itself is not kept.
+  std::unique_ptr<UnknownMap> map(new UnknownMap);
+  map->info = msg->info;
+  map->unknown.assign(msg->data.size());
+  for (std::size_t i = 0; i < msg->data.size(); ++i)
+  {
+    if (msg->data[i] < 0)
+    {
+      map->unknown.set(i);
+    }
+  }
   std::lock_guard<std::mutex> lock(core_mutex_);
-  map_ = msg;
+  map_ = std::move(map);
   map_seen_ = true;
   applyUnknownMap();
 }
@@ -42,6 +53,7 @@ void SharingLayer::applyUnknownMap()
   // master of another size or origin (a static layer with a different map, rolling window off) still works.
   const GridGeometry g = core_->geometry();
   const nav_msgs::MapMetaData& info = map_->info;
+  const BitGrid& map_unknown = map_->unknown;
   std::vector<std::uint8_t> unknown(g.cellCount(), 0);
   std::size_t count = 0;
   for (unsigned int my = 0; my < g.size_y; ++my)
@@ -57,7 +69,7 @@ void SharingLayer::applyUnknownMap()
         continue;  // outside the map: the static layer's business
       }
       const std::size_t index = static_cast<std::size_t>(fy) * info.width + static_cast<std::size_t>(fx);
-      if (map_->data[index] < 0)
+      if (map_unknown.test(index))
       {
         unknown[g.getIndex(mx, my)] = 1;
         ++count;

@@ -179,6 +179,18 @@ FleetRobotParams SharingLayer::fleetRobotParams()
   return core_ ? core_->fleetRobots().params() : fleet_params_;
 }
 
+bool SharingLayer::mapReceived()
+{
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  return static_seen_ && !static_pending_ && (map_topic_.empty() || map_seen_);
+}
+
+std::size_t SharingLayer::planPoses()
+{
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  return core_ ? core_->plan().size() : 0;
+}
+
 void SharingLayer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
 {
   using diagnostic_msgs::DiagnosticStatus;

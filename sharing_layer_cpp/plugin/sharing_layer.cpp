@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 #include <cmath>
+#include <cstring>
 #include <iterator>
 #include <sstream>
 #include <stdexcept>
@@ -29,6 +30,33 @@ Observation toObservation(const costmap_2d::Observation& observation)
   Observation obs;
   obs.origin = Point3{ observation.origin_.x, observation.origin_.y, observation.origin_.z };
   const sensor_msgs::PointCloud2& cloud = *observation.cloud_;
+  // float32 x, y, z (what ObservationBuffer makes of every cloud and scan): read at their offsets, point by point as
+  // PointCloud2ConstIterator walks them (data.size() / point_step points), without its per-point bookkeeping.
+  int offsets[3] = { -1, -1, -1 };
+  for (const sensor_msgs::PointField& field : cloud.fields)
+  {
+    const int axis = field.name == "x" ? 0 : field.name == "y" ? 1 : field.name == "z" ? 2 : -1;
+    if (axis >= 0 && field.datatype == sensor_msgs::PointField::FLOAT32 && field.count == 1 && !cloud.is_bigendian)
+    {
+      offsets[axis] = static_cast<int>(field.offset);
+    }
+  }
+  if (offsets[0] >= 0 && offsets[1] >= 0 && offsets[2] >= 0 && cloud.point_step >= 4 &&
+      static_cast<std::uint32_t>(std::max({ offsets[0], offsets[1], offsets[2] })) + 4 <= cloud.point_step)
+  {
+    const std::size_t n = cloud.data.size() / cloud.point_step;
+    obs.points.resize(n);
+    const std::uint8_t* data = cloud.data.data();
+    for (std::size_t i = 0; i < n; ++i, data += cloud.point_step)
+    {
+      float v[3];
+      std::memcpy(&v[0], data + offsets[0], 4);
+      std::memcpy(&v[1], data + offsets[1], 4);
+      std::memcpy(&v[2], data + offsets[2], 4);
+      obs.points[i] = Point3{ v[0], v[1], v[2] };
+    }
+    return obs;
+  }
   obs.points.reserve(cloud.width * cloud.height);
   sensor_msgs::PointCloud2ConstIterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
   for (; x != x.end(); ++x, ++y, ++z)
@@ -452,7 +480,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
 void SharingLayer::processObservation(const SourceObservation& source_observation, double now, double robot_x,
                                       double robot_y, double* min_x, double* min_y, double* max_x, double* max_y)
 {
-  const costmap_2d::Observation& observation = source_observation.observation;
+  const costmap_2d::Observation& observation = *source_observation.observation;
   const ScanLimits& limits = source_observation.limits;
   Observation scan = toObservation(observation);
   ScanOutcome outcome;
@@ -526,9 +554,10 @@ bool SharingLayer::sourceObservations(std::vector<SourceObservation>& out)
     limits.raytrace_range = observation.raytrace_range_;
     limits.marking = marking;
     limits.clearing = clearing;
-    by_rank[clearing ? (marking ? 1 : 0) : 2].push_back(SourceObservation{ observation, limits, source });
+    by_rank[clearing ? (marking ? 1 : 0) : 2].push_back(SourceObservation{ &observation, limits, source });
   };
   bool current = true;
+  cycle_observations_.resize(observation_buffers_.size());  // before any is filled: their addresses stay
   for (std::size_t i = 0; i < observation_buffers_.size(); ++i)
   {
     const auto& buffer = observation_buffers_[i];
@@ -538,7 +567,8 @@ bool SharingLayer::sourceObservations(std::vector<SourceObservation>& out)
     {
       continue;
     }
-    std::vector<costmap_2d::Observation> observations;
+    std::vector<costmap_2d::Observation>& observations = cycle_observations_[i];
+    observations.clear();
     buffer->lock();
     buffer->getObservations(observations);
     current = current && buffer->isCurrent();
@@ -629,7 +659,10 @@ void SharingLayer::updateCosts(costmap_2d::Costmap2D& master_grid, int min_i, in
     default:
       break;
   }
-  core_->drawShared(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY());
+  // Inside the window only (the layer contract): shared obstacles outside it are still in the master from the cycles
+  // that drew them, and one that changes grows the bounds over itself (takeDirtyBounds in updateBounds).
+  core_->drawShared(master_grid.getCharMap(), master_grid.getSizeInCellsX() * master_grid.getSizeInCellsY(), min_i,
+                    min_j, max_i, max_j);
 }
 
 void SharingLayer::clearArea(int start_x, int start_y, int end_x, int end_y, bool invert_area)

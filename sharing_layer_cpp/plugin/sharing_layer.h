@@ -23,6 +23,7 @@
 
 #include <sharing_layer_cpp/SharingLayerConfig.h>
 
+#include "sharing_layer/bit_grid.h"
 #include "sharing_layer/sharing_core.h"
 #include "layer_config.h"
 
@@ -72,6 +73,11 @@ public:
   LayerParams sharingParams();
   /// @brief robot_exclusion_margin and robot_timeout in use.
   FleetRobotParams fleetRobotParams();
+  /// @brief Whether the layer left "waiting for the map" (/diagnostics' "map received": the static layer's map read
+  /// from the master) and, when a map_topic is set, a map arrived on it.
+  bool mapReceived();
+  /// @brief Poses of the plan the plan trigger follows (0: none).
+  std::size_t planPoses();
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);
@@ -124,7 +130,14 @@ private:
   bool stuck_pending_ = false;
   bool inscribed_from_footprint_ = true;  ///< ~inscribed_radius not set: follow the footprint
   TriggerSource stuck_source_ = TriggerSource::StuckFeedback;
-  nav_msgs::OccupancyGrid::ConstPtr map_;  ///< last a-priori map, for its unknown cells
+  /// The last a-priori map's unknown (-1) cells, a bit per map cell, and where they lie (re-applied to a new or moved
+  /// core). Not the message: its byte per cell stayed with the layer for the map's lifetime (issue 29).
+  struct UnknownMap
+  {
+    nav_msgs::MapMetaData info;
+    BitGrid unknown;
+  };
+  std::unique_ptr<UnknownMap> map_;
   FleetRobotParams fleet_params_;          ///< robot_exclusion_margin, robot_timeout
   sharing_msgs::RobotFootprintArray::ConstPtr fleet_robots_;  ///< last fleet_robots, re-applied to a new core
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
@@ -138,11 +151,14 @@ private:
   /// marking-only ones. @return false when a source is not current (ObstacleLayer's current_)
   struct SourceObservation
   {
-    costmap_2d::Observation observation;
+    const costmap_2d::Observation* observation;  ///< in cycle_observations_ or ObstacleLayer's static ones
     ScanLimits limits;
     std::string source;  ///< its name in observation_sources, for logs
   };
   bool sourceObservations(std::vector<SourceObservation>& out);
+  /// This cycle's observations, per buffer, filled in place (costmap_2d::Observation copies its whole cloud and has no
+  /// move: each copy avoided is a cloud's allocation and copy per cycle).
+  std::vector<std::vector<costmap_2d::Observation>> cycle_observations_;
   /// @brief One observation through the core: its monitoring updates published, the plan trigger checked, the
   /// bounds grown by what it touched; core_mutex_ held.
   void processObservation(const SourceObservation& source_observation, double now, double robot_x, double robot_y,

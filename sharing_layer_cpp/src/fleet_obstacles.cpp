@@ -452,13 +452,43 @@ void FleetObstacles::unmarkMonitored(const CellRect& rect, const GridGeometry& g
   }
 }
 
-void FleetObstacles::draw(std::uint8_t* master) const
+void FleetObstacles::draw(std::uint8_t* master, const GridGeometry& g, int min_i, int min_j, int max_i,
+                          int max_j) const
 {
+  // costmap_2d's layer contract: updateCosts writes the master only inside its window. Present cells are sorted
+  // (row-major indexes), so the window's rows are one contiguous run of each obstacle's cells, found by bisection:
+  // the cost follows the cells in the window's rows, not every shared cell.
+  const int x0 = std::max(min_i, 0), y0 = std::max(min_j, 0);
+  const int x1 = std::min(max_i, static_cast<int>(g.size_x)), y1 = std::min(max_j, static_cast<int>(g.size_y));
+  if (x0 >= x1 || y0 >= y1)
+  {
+    return;
+  }
+  const std::uint32_t first = static_cast<std::uint32_t>(y0) * g.size_x;
+  const std::uint32_t end = static_cast<std::uint32_t>(y1) * g.size_x;
+  const bool whole_rows = x0 == 0 && x1 == static_cast<int>(g.size_x);
   for (const auto& entry : shared_)
   {
-    for (std::uint32_t index : entry.second.cells.present())
+    const std::vector<std::uint32_t>& present = entry.second.cells.present();
+    if (present.empty() || present.back() < first || present.front() >= end)
     {
-      master[index] = LETHAL_OBSTACLE;
+      continue;
+    }
+    auto it = std::lower_bound(present.begin(), present.end(), first);
+    const auto stop = std::lower_bound(it, present.end(), end);
+    for (; it != stop; ++it)
+    {
+      const std::uint32_t index = *it;
+      if (whole_rows)
+      {
+        master[index] = LETHAL_OBSTACLE;
+        continue;
+      }
+      const int x = static_cast<int>(index % g.size_x);
+      if (x >= x0 && x < x1)
+      {
+        master[index] = LETHAL_OBSTACLE;
+      }
     }
   }
 }

@@ -124,12 +124,18 @@ std::vector<std::uint32_t> SharingCore::sharedCells(const std::string& uuid) con
 
 void SharingCore::drawShared(std::uint8_t* master, std::size_t cell_count) const
 {
+  drawShared(master, cell_count, 0, 0, static_cast<int>(geometry().size_x), static_cast<int>(geometry().size_y));
+}
+
+void SharingCore::drawShared(std::uint8_t* master, std::size_t cell_count, int min_i, int min_j, int max_i,
+                             int max_j) const
+{
   if (cell_count != geometry().cellCount())
   {
     throw std::invalid_argument("drawShared: master grid has " + std::to_string(cell_count) + " cells, layer " +
                                 geometry().describe());
   }
-  fleet_.draw(master);
+  fleet_.draw(master, geometry(), min_i, min_j, max_i, max_j);
 }
 
 WorldBounds SharingCore::takeDirtyBounds()

@@ -256,6 +256,49 @@ TEST(Overlay, SharedCellsAreDrawnAloneAndSurviveTheObstacleReset)
   EXPECT_EQ((std::vector<std::uint32_t>{ cell(30, 30), cell(31, 30) }), core.sharedCells("a"));
 }
 
+// costmap_2d's layer contract: updateCosts(master, min_i, min_j, max_i, max_j) writes the master only inside that
+// window. Every cell outside it keeps its value, whatever is shared there; inside, shared cells are drawn.
+TEST(Overlay, DrawingInAWindowWritesNothingOutsideIt)
+{
+  SharingCore core(grid40(), params());
+  // One obstacle across the window's left edge, one wholly outside it, one inside.
+  ASSERT_TRUE(core.applyShared(share("edge", { cell(9, 12), cell(10, 12), cell(11, 12) }, Subsection(0.9, 1.2, 1.2, 1.3)),
+                               0.0).ok);
+  ASSERT_TRUE(core.applyShared(share("out", { cell(30, 30), cell(5, 5), cell(15, 25) }, Subsection(0.5, 0.5, 3.1, 3.1)),
+                               0.0).ok);
+  ASSERT_TRUE(core.applyShared(share("in", { cell(12, 15) }, Subsection(1.2, 1.5, 1.3, 1.6)), 0.0).ok);
+  const std::vector<std::uint8_t> before(grid40().cellCount(), 7);
+  std::vector<std::uint8_t> master = before;
+  core.drawShared(master.data(), master.size(), 10, 10, 20, 20);  // [10, 20) x [10, 20)
+  std::size_t outside_written = 0;
+  for (unsigned int y = 0; y < 40; ++y)
+  {
+    for (unsigned int x = 0; x < 40; ++x)
+    {
+      const bool inside = x >= 10 && x < 20 && y >= 10 && y < 20;
+      if (!inside && master[cell(x, y)] != 7)
+      {
+        ++outside_written;
+        ADD_FAILURE() << "cell (" << x << ", " << y << ") outside the window was written";
+      }
+    }
+  }
+  EXPECT_EQ(0u, outside_written);
+  EXPECT_EQ(7, master[cell(9, 12)]);
+  EXPECT_EQ(LETHAL_OBSTACLE, master[cell(10, 12)]);
+  EXPECT_EQ(LETHAL_OBSTACLE, master[cell(11, 12)]);
+  EXPECT_EQ(LETHAL_OBSTACLE, master[cell(12, 15)]);
+  EXPECT_EQ(static_cast<long>(master.size() - 3), std::count(master.begin(), master.end(), 7));
+  // Empty, inverted and off-grid windows draw nothing; a window larger than the grid is clipped to it.
+  master = before;
+  core.drawShared(master.data(), master.size(), 20, 20, 20, 30);
+  core.drawShared(master.data(), master.size(), 30, 30, 10, 10);
+  core.drawShared(master.data(), master.size(), 40, 0, 60, 40);
+  EXPECT_EQ(before, master);
+  core.drawShared(master.data(), master.size(), -5, -5, 50, 50);
+  EXPECT_EQ(static_cast<long>(master.size() - 7), std::count(master.begin(), master.end(), 7));
+}
+
 TEST(Overlay, ClearOutsideAWindowKeepsTheWindowAndSharedObstacles)
 {
   // move_base's conservative reset around a robot at cell (20, 20): marks near it stay, far marks go.

@@ -92,8 +92,9 @@ public:
                CellFlags& flags, std::vector<ObstacleUpdate>& updates);
 
   // The master grid.
-  /// @brief Sets every present cell to lethal in a master grid of the grid's size; never lowers a cost.
-  void draw(std::uint8_t* master) const;
+  /// @brief Sets every present cell inside the cell window [min_i, max_i) x [min_j, max_j) (clipped to g) to lethal
+  /// in a master grid of g's size; touches nothing outside the window and never lowers a cost.
+  void draw(std::uint8_t* master, const GridGeometry& g, int min_i, int min_j, int max_i, int max_j) const;
   WorldBounds takeDirtyBounds();
 
   /**

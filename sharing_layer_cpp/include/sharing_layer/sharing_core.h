@@ -174,6 +174,10 @@ public:
   /// @brief Sets every present shared cell to lethal in a master grid of the same geometry,
   /// touching no other cell and never lowering a cost. @throws std::invalid_argument on a size mismatch
   void drawShared(std::uint8_t* master, std::size_t cell_count) const;
+  /// @brief The same inside the cell window [min_i, max_i) x [min_j, max_j) only (costmap_2d's updateCosts: a layer
+  /// writes the master only inside the update window; cells outside keep what the last cycles left there). The
+  /// window is clipped to the grid; an empty or inverted one draws nothing.
+  void drawShared(std::uint8_t* master, std::size_t cell_count, int min_i, int min_j, int max_i, int max_j) const;
 
   /// @brief World bounds of shared cells added or removed since the last call, then forgets them.
   WorldBounds takeDirtyBounds();

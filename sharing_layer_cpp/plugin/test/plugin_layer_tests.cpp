@@ -394,6 +394,49 @@ TEST(PluginLayer, AMapResizeOrMoveKeepsSharedObstaclesWhereTheyAreInTheWorld)
   EXPECT_EQ(0u, lethal);
 }
 
+// costmap_2d's layer contract: updateCosts(master, min_i, min_j, max_i, max_j) may write the master only inside that
+// window (LayeredCostmap resets only the window; what lies outside is other layers' and earlier cycles'). The layer
+// drew every shared cell on every cycle, wherever the window was.
+TEST(PluginLayer, UpdateCostsWritesTheMasterOnlyInsideTheUpdateWindow)
+{
+  tf2_ros::Buffer tf;
+  tf.setUsingDedicatedThread(true);
+  setSources("window", { { "scan", true, true, 2.5, 3.0 } });
+  costmap_2d::LayeredCostmap costmap("map", false, false);
+  auto* layer = new FedSharingLayer();
+  costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(layer));
+  layer->initialize(&costmap, "window", &tf);
+  costmap.resizeMap(200, 200, 0.05, 0.0, 0.0);
+  ASSERT_TRUE(shareBlockAt3m(costmap, 5.0, 5.0));  // cells (60..62, 60..62)
+  placeLaser(tf, 5.0, 5.0);
+  layer->feed(0, ring(360, 0.0));
+  costmap.updateMap(5.0, 5.0, 0.0);  // the layer's own grid has marks around (5, 5) now
+  costmap_2d::Costmap2D& master = *costmap.getCostmap();
+  const auto check = [&](int min_i, int min_j, int max_i, int max_j, std::size_t block_cells_inside) {
+    SCOPED_TRACE("window [" + std::to_string(min_i) + ", " + std::to_string(max_i) + ") x [" + std::to_string(min_j) +
+                 ", " + std::to_string(max_j) + ")");
+    std::fill(master.getCharMap(), master.getCharMap() + 200 * 200, 77);
+    layer->updateCosts(master, min_i, min_j, max_i, max_j);
+    std::size_t outside_written = 0, block_drawn = 0;
+    for (int y = 0; y < 200; ++y)
+    {
+      for (int x = 0; x < 200; ++x)
+      {
+        const bool inside = x >= min_i && x < max_i && y >= min_j && y < max_j;
+        const unsigned char cost = master.getCost(x, y);
+        outside_written += !inside && cost != 77;
+        block_drawn += inside && x >= 60 && x <= 62 && y >= 60 && y <= 62 && cost == costmap_2d::LETHAL_OBSTACLE;
+      }
+    }
+    EXPECT_EQ(0u, outside_written) << "master cells written outside the update window";
+    EXPECT_EQ(block_cells_inside, block_drawn) << "the shared block's cells inside the window are drawn";
+  };
+  check(61, 61, 120, 120, 4);  // the block's corner inside, the layer's marks around (5, 5) too
+  check(0, 0, 40, 40, 0);      // neither the block nor the scan
+  check(0, 0, 200, 200, 9);    // the whole map
+  check(70, 70, 60, 60, 0);    // inverted: nothing at all
+}
+
 // ObstacleLayer takes any range; the core refuses a negative one. Bad input: that source is skipped with an
 // error naming it, never an exception out of updateMap (move_base would die).
 TEST(PluginLayer, ASourceWithANegativeRangeIsSkippedNotACrash)
