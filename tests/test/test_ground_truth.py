@@ -73,3 +73,31 @@ def test_run_figures_takes_the_viewer_from_the_sharers_track():
     assert got["off"] == [(13.0, 5.6)]
     assert got["recall"] == {"block_short": 1.0}
     assert run_figures([], tracks, blocks, corridors, 0.2)["recall"] == {}
+
+
+def test_a_face_reaching_into_door_jambs_counts_only_where_it_can_be_shared():
+    """The dead-end world: block_far (2.0 m) closes a 1.8 m door of a 3.0 m corridor; its face ends lie in
+    the jambs, where no robot can share (static_tolerance). With the map's walls the recall counts the face
+    between the jambs only; with the corridor alone those ends count as missed."""
+    from fleet_tests.bench import OccupancyIndex
+    from fleet_tests.ground_truth import run_figures
+    res = 0.05
+    w, h, ox, oy = 80, 20, 11.6, 10.4                       # 11.6..15.6 x 10.4..11.4
+    data = [0] * (w * h)
+    for iy in range(h):
+        y = oy + (iy + 0.5) * res
+        for ix in range(w):
+            x = ox + (ix + 0.5) * res
+            if y > 10.8 and not 12.2 < x < 14.0:             # the wall the door is cut into
+                data[iy * w + ix] = 100
+    walls = OccupancyIndex(w, h, res, ox, oy, data)
+    block = {"pose": [13.1, 10.9, 0.0], "size": [2.0, 0.3], "corridor": "long"}
+    margin = 0.2
+    shared = [c for c in face_cells(y=10.725, x0=12.1, x1=14.1) if 12.2 + margin - res < c[0] < 14.0 - margin + res]
+    tracks = {"robot_0": [(0.0, 13.1, 8.8), (2.0, 13.1, 8.9)]}
+    messages = [(1.0, "robot_0", res, shared)]
+    corridors = {"long": [11.6, 3.4, 14.6, 11.4]}
+    with_walls = run_figures(messages, tracks, {"block_far": block}, corridors, margin, walls)["recall"]["block_far"]
+    corridor_only = run_figures(messages, tracks, {"block_far": block}, corridors, margin)["recall"]["block_far"]
+    assert with_walls == 1.0
+    assert corridor_only < 0.9

@@ -334,7 +334,7 @@ def main(argv=None):
     tolerance = int(rospy.get_param("/robot_0/move_base/global_costmap/sharing_layer/static_tolerance", 3))
     truth = run_figures([(t, m.source, m.resolution, [cell_centre(m, i) for i in m.marked_indexes])
                          for name, t, m in to_fleet if m.source == name and m.marked_indexes],
-                        tracks, blocks, corridors, (tolerance + 1) * (grid.info.resolution if grid else 0.05))
+                        tracks, blocks, corridors, (tolerance + 1) * (grid.info.resolution if grid else 0.05), walls)
     out = {
         "robots": args.robots,
         "seed": args.seed,

@@ -78,12 +78,14 @@ def face_recall(cells, resolution, block, viewer, free=lambda x, y: True, step=N
     return 1.0 - len(missed) / float(len(points)), missed
 
 
-def run_figures(messages, tracks, blocks, corridors, margin):
+def run_figures(messages, tracks, blocks, corridors, margin, walls=None):
     """Precision over every cell the robots sent, and face recall per block someone shared.
 
     messages: [(sim time, source robot, resolution, [(x, y) of each marked cell])] of the robots' own fleet
     messages; tracks: name -> [(t, x, y)]; blocks: name -> block; corridors: name -> [min_x, min_y, max_x, max_y]
     (a block's face counts between its corridor's walls, `margin` m in from each: never shareable nearer);
+    walls: the a-priori map's occupied cells (bench.OccupancyIndex) or None: face points within `margin` of one
+    do not count either (a block in a door narrower than its corridor reaches into the door's jambs);
     the viewer of a block is its sharer where it first sent a cell on it.
     {"cells": n, "precision": p, "off": [first cells on no object], "recall": {block: r}}."""
     from fleet_tests.bench import pose_at
@@ -103,8 +105,8 @@ def run_figures(messages, tracks, blocks, corridors, margin):
         # The layouts' corridors run along y, and a block closes one across its width.
         x0, _y0, x1, _y1 = corridors.get(block.get("corridor"), (-float("inf"), 0.0, float("inf"), 0.0))
 
-        def free(x, _y, x0=x0, x1=x1):
-            return x0 + margin < x < x1 - margin
+        def free(x, y, x0=x0, x1=x1):
+            return x0 + margin < x < x1 - margin and (walls is None or not walls.near(x, y, margin))
 
         recall[name] = round(face_recall(cells, resolution, block, viewer, free=free)[0], 4)
     return {"cells": len(set(cells)), "precision": round(value, 4) if value == value else value,
