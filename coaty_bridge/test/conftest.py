@@ -276,6 +276,7 @@ def ros_graph():
     if reason:
         pytest.skip(reason)
     graph = RosGraph()
+    graph.json_lines_process = JsonLinesProcess
     yield graph
     graph.close()
 
@@ -300,3 +301,15 @@ def observer_factory():
             obs.close()
         except Exception:
             pass
+
+
+@pytest.fixture(scope="module")
+def module_ros_graph():
+    """One private rosmaster for a whole module (tests whose nodes start once; test_attacks_nodes.py)."""
+    reason = ros_unavailable()
+    if reason:
+        pytest.skip(reason)
+    graph = RosGraph()
+    graph.json_lines_process = JsonLinesProcess
+    yield graph
+    graph.close()

@@ -4,7 +4,9 @@ server and watches every robot's handler.
 
 Usage: fleet_probe.py robot_0 robot_1 ...
 Publishes a latched /map (0.05 m, origin (-5, -2.5), 200 x 100 cells). Prints JSON lines:
-  {"event": "list", "robot": r, "uuids": [...], "cells": {uuid: n}}  on every shared_obstacle_list
+  {"event": "list", "robot": r, "uuids": [...], "cells": {uuid: n}, "deadlines", "rects", "sources"}
+                                                                   on every shared_obstacle_list
+  {"event": "fleet_robots", "robot": r, "robots": [names]}          on every fleet_robots
   {"event": "diagnostics", "status": [{"name", "level", "message", "values"}]}
   {"event": "reply", "id": i, ...}                                 answer to a command
 Commands (one JSON object per stdin line):
@@ -20,7 +22,7 @@ import threading
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import OccupancyGrid
-from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
+from sharing_msgs.msg import RobotFootprintArray, SharedObstacle, SharedObstacleArray
 from sharing_msgs.srv import AddObstacle
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -58,7 +60,11 @@ def main():
         rospy.Subscriber("/%s/shared_obstacle_list" % robot, SharedObstacleArray, lambda msg, r=robot: emit(
             {"event": "list", "robot": r, "uuids": sorted(o.uuid for o in msg.obstacles),
              "cells": {o.uuid: len(o.marked_indexes) for o in msg.obstacles},
-             "deadlines": {o.uuid: o.deadline for o in msg.obstacles}}))
+             "deadlines": {o.uuid: o.deadline for o in msg.obstacles},
+             "rects": {o.uuid: [round(v, 4) for v in o.rectangle_shape] for o in msg.obstacles},
+             "sources": {o.uuid: o.source for o in msg.obstacles}}))
+        rospy.Subscriber("/%s/fleet_robots" % robot, RobotFootprintArray, lambda msg, r=robot: emit(
+            {"event": "fleet_robots", "robot": r, "robots": [f.robot for f in msg.robots]}))
         for topic in ("from_fleet", "obstacle_updates"):
             publishers[(robot, topic)] = rospy.Publisher("/%s/%s" % (robot, topic), SharedObstacle,
                                                          queue_size=100)
