@@ -270,8 +270,7 @@ def ros_unavailable():
     return None
 
 
-@pytest.fixture
-def ros_graph():
+def _ros_graph():
     reason = ros_unavailable()
     if reason:
         pytest.skip(reason)
@@ -279,6 +278,11 @@ def ros_graph():
     graph.json_lines_process = JsonLinesProcess
     yield graph
     graph.close()
+
+
+@pytest.fixture
+def ros_graph():
+    yield from _ros_graph()
 
 
 @pytest.fixture
@@ -306,10 +310,4 @@ def observer_factory():
 @pytest.fixture(scope="module")
 def module_ros_graph():
     """One private rosmaster for a whole module (tests whose nodes start once; test_attacks_nodes.py)."""
-    reason = ros_unavailable()
-    if reason:
-        pytest.skip(reason)
-    graph = RosGraph()
-    graph.json_lines_process = JsonLinesProcess
-    yield graph
-    graph.close()
+    yield from _ros_graph()

@@ -32,11 +32,10 @@ import pytest
 
 from coaty_bridge import codec, footprint as fp
 from coaty_bridge.identity import identity_for
-from coaty_bridge.security import MONITOR, FleetCredentials, read_password_file
 from coaty_bridge.topics import Topic
 from sharing_msgs import obstacle_rules
 
-from test_secure_default import RUN_BROKER, Lines, Peer, launch_bridge_params
+from test_secure_default import Lines, Peer, launch_bridge_params, start_secure_broker
 
 pytestmark = [pytest.mark.ros, pytest.mark.broker]
 
@@ -73,19 +72,7 @@ def wait_until(predicate, what, timeout=WAIT):
 class NodeFleet:
     def __init__(self, graph, credentials, log_dir):
         self.graph, self.credentials = graph, credentials
-        self.broker = subprocess.Popen(
-            [sys.executable, RUN_BROKER, "__name:=fleet_broker", "_port:=0", "_url_param:=/fleet/broker_url",
-             "_insecure:=false", "_robots:=%d" % (len(ROBOTS) + 1), "_credentials_dir:=" + credentials],
-            env=graph.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        graph.nodes.append(self.broker)
-        self.broker_out = Lines(self.broker)
-        wait_until(lambda: any(l.startswith("mqtt://") for l in self.broker_out.lines) or
-                   self.broker.poll() is not None, "run_broker's URL")
-        urls = [l for l in self.broker_out.lines if l.startswith("mqtt://")]
-        assert urls, "run_broker did not start: %s" % "\n".join(self.broker_out.lines)
-        self.port = int(urls[0].rsplit(":", 1)[1])
-        self.creds = FleetCredentials(credentials, ROBOTS + (ATTACKER,), NS)
-        self.watcher = Peer(self.port, MONITOR, read_password_file(self.creds.monitor_password_file))
+        start_secure_broker(self, graph, ROBOTS + (ATTACKER,), credentials)
         self.peers = [self.watcher]
         wait_until(self.watcher.settled, "the watcher")
         assert self.watcher.accepted

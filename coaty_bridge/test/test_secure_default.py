@@ -26,6 +26,8 @@ from coaty_bridge.client import BridgeConfig, _make_paho_client
 from coaty_bridge.identity import identity_for
 from coaty_bridge.security import MONITOR, FleetCredentials, read_password_file
 
+from test_bridge_auth import adv, obstacle as auth_obstacle
+
 pytestmark = [pytest.mark.broker]
 OT = codec.DEFAULT_OBJECT_TYPE
 NS = "fleet"
@@ -87,16 +89,8 @@ class Peer:
 
 
 def obstacle(source, **fields):
-    values = dict(uuid=str(uuidlib.uuid4()), source=source, version=1, stamp=100.5, frame_id="map", deadline=60,
-                  rectangle=(0.0, 0.0, 1.0, 1.0), resolution=0.05, origin_x=0.0, origin_y=0.0, size_x=100,
-                  size_y=100, marked=(5, 6), cleared=())
-    values.update(fields)
-    return codec.ObstacleUpdate(**values)
-
-
-def adv(source_id, update):
-    return ("coaty/3/%s/ADV::%s/%s" % (NS, OT, source_id),
-            codec.advertise_payload(codec.obstacle_to_object(update, OT)))
+    """test_bridge_auth's obstacle, stamped 100.5."""
+    return auth_obstacle(source, **dict({"stamp": 100.5}, **fields))
 
 
 def ros_msg(source, **fields):
@@ -130,24 +124,29 @@ class Lines:
         return [line for line in list(self.lines) if fragment in line]
 
 
+def start_secure_broker(fleet, graph, robots, credentials):
+    """run_broker as fleet.launch starts it (name fleet_broker, a free port, `robots` logins, the folder) on
+    `graph`; sets fleet.broker, .broker_out, .port, .creds and .watcher: the read-only monitor login, which
+    (like every login) reads coaty/#."""
+    fleet.broker = subprocess.Popen(
+        [sys.executable, RUN_BROKER, "__name:=fleet_broker", "_port:=0", "_url_param:=/fleet/broker_url",
+         "_insecure:=false", "_robots:=%d" % len(robots), "_credentials_dir:=" + credentials],
+        env=graph.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    graph.nodes.append(fleet.broker)
+    fleet.broker_out = Lines(fleet.broker)
+    wait_until(lambda: any(line.startswith("mqtt://") for line in fleet.broker_out.lines) or
+               fleet.broker.poll() is not None, "run_broker's URL")
+    urls = [line for line in fleet.broker_out.lines if line.startswith("mqtt://")]
+    assert urls, "run_broker did not start: %s" % "\n".join(fleet.broker_out.lines)
+    fleet.port = int(urls[0].rsplit(":", 1)[1])
+    fleet.creds = FleetCredentials(credentials, robots, NS)
+    fleet.watcher = Peer(fleet.port, MONITOR, read_password_file(fleet.creds.monitor_password_file))
+
+
 class SecureFleet:
     def __init__(self, graph, credentials):
         self.graph, self.credentials = graph, credentials
-        # run_broker as fleet.launch starts it: name fleet_broker, a free port, the robots, the folder
-        self.broker = subprocess.Popen(
-            [sys.executable, RUN_BROKER, "__name:=fleet_broker", "_port:=0", "_url_param:=/fleet/broker_url",
-             "_insecure:=false", "_robots:=%d" % len(ROBOTS), "_credentials_dir:=" + credentials],
-            env=graph.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        graph.nodes.append(self.broker)
-        self.broker_out = Lines(self.broker)
-        wait_until(lambda: any(line.startswith("mqtt://") for line in self.broker_out.lines) or
-                   self.broker.poll() is not None, "run_broker's URL")
-        urls = [line for line in self.broker_out.lines if line.startswith("mqtt://")]
-        assert urls, "run_broker did not start: %s" % "\n".join(self.broker_out.lines)
-        self.port = int(urls[0].rsplit(":", 1)[1])
-        self.creds = FleetCredentials(credentials, ROBOTS, NS)
-        # the watcher: the read-only monitor login, which (like every login) reads coaty/#
-        self.watcher = Peer(self.port, MONITOR, read_password_file(self.creds.monitor_password_file))
+        start_secure_broker(self, graph, ROBOTS, credentials)
         self.peers = [self.watcher]
         wait_until(lambda: self.watcher.settled(), "the watcher")
         assert self.watcher.accepted, "the monitor login was refused"
