@@ -321,7 +321,9 @@ class CoatyBridgeClient:
         # (a full-state entry alone cannot carry a clear; see README "Partitions and restarts")
         self._own_log = collections.OrderedDict()
         self._pending_discovers = {}
-        self._discover_buckets = {}  # requester sourceId -> (tokens, last refill), see _discover_allowed
+        # a token bucket per Discover requester (sourceId): a flood from one empties only its own
+        self._discover_buckets = TokenBuckets(config.discover_answer_rate, config.discover_answer_burst,
+                                              max_keys=_MAX_DISCOVER_REQUESTERS)
         # what paho reads goes into a queue per sourceId, served round-robin by one worker (fairness.py);
         # obstacle Advertises beyond a sender's token bucket are dropped before they queue
         self._inbox = FairQueue(config.source_queue_size)
@@ -933,21 +935,10 @@ class CoatyBridgeClient:
                       footprint.robot, type(err).__name__, err)
 
     def _discover_allowed(self, requester):
-        """Token bucket per requester: True when a Discover from it may be answered now. A flood
-        from one requester empties only its own bucket, so others are answered as before."""
-        now = self._clock()
-        rate, burst = self.config.discover_answer_rate, self.config.discover_answer_burst
+        """True when a Discover from `requester` may be answered now (its own token bucket; the
+        longest-quiet requesters, whose buckets are full again, are forgotten first)."""
         with self._lock:
-            buckets = self._discover_buckets
-            tokens, last = buckets.pop(requester, (float(burst), now))
-            tokens = min(float(burst), tokens + max(0.0, now - last) * rate)
-            allowed = tokens >= 1.0
-            if allowed:
-                tokens -= 1.0
-            buckets[requester] = (tokens, now)  # most recent last
-            while len(buckets) > _MAX_DISCOVER_REQUESTERS:
-                buckets.pop(next(iter(buckets)))  # the longest quiet requester: its bucket is full again
-        return allowed
+            return self._discover_buckets.allow(requester, self._clock())
 
     def _answer_discover(self, topic, request):
         if not self._discover_allowed(topic.source_id):

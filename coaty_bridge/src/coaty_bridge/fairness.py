@@ -72,7 +72,3 @@ class FairQueue:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-
-    def lengths(self):
-        with self._cond:
-            return {key: len(queue) for key, queue in self._queues.items()}

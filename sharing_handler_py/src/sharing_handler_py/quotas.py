@@ -52,12 +52,6 @@ class TokenBuckets:
             return True
         return False
 
-    def tokens(self, key, now):
-        bucket = self._buckets.get(key)
-        if bucket is None:
-            return float(self.burst)
-        return min(float(self.burst), bucket[0] + max(0.0, now - bucket[1]) * self.rate)
-
 
 class DropReport:
     """Counts drops per (source, reason) and writes a log line a field engineer can act on, at
