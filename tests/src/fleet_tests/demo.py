@@ -17,7 +17,6 @@ import json
 import math
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -27,6 +26,7 @@ import rospkg
 import rospy
 from PIL import Image, ImageDraw
 
+from fleet_tests.processes import stop as stop_process
 from fleet_tests.rviz_shot import RvizError, RvizSession
 from fleet_tests.scenario import STATE_NAMES, Fleet, ScenarioError, inside, percentile, wait_for_sim_time
 
@@ -365,13 +365,7 @@ class Demo:
             if mc is not None:
                 result["log"] = mc.lines()
                 mc.stop()
-            if node is not None and node.poll() is None:
-                node.send_signal(signal.SIGINT)
-                try:
-                    node.wait(15)
-                except subprocess.TimeoutExpired:
-                    os.killpg(node.pid, signal.SIGKILL)
-                    node.wait()
+            stop_process(node)
             if broker is not None:
                 broker.stop()
         self.vda_result = result

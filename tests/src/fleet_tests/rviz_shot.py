@@ -29,6 +29,8 @@ import rosgraph
 import rospy
 import yaml
 
+from fleet_tests.processes import stop as stop_process
+
 # rviz's output lines that are not about the config: Debian's rviz asks rospack for the
 # media_export package (Ogre media of ROS's own packaging), which Debian does not have; rviz then
 # uses its own media folder (the shapes and textures of the displays still load). When the first
@@ -166,14 +168,8 @@ class RvizSession:
                                      start_new_session=True)
 
     def stop(self):
-        for proc in (self.rviz, self.xvfb):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT if proc is self.rviz else signal.SIGTERM)
-                try:
-                    proc.wait(15)
-                except subprocess.TimeoutExpired:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                    proc.wait()
+        stop_process(self.rviz, signal.SIGINT)
+        stop_process(self.xvfb, signal.SIGTERM)
         self.rviz = self.xvfb = None
 
     def wait_ready(self, timeout=60.0, settle=3.0):
