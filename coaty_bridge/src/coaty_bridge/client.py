@@ -11,6 +11,7 @@ and counted; the MQTT thread never sees an exception.
 import collections
 import json
 import logging
+import math
 import select
 import socket
 import secrets
@@ -22,7 +23,7 @@ from dataclasses import dataclass, field
 
 import paho.mqtt.client as mqtt
 
-from coaty_bridge import codec, footprint as footprints, lifetimes
+from coaty_bridge import areas, codec, footprint as footprints, lifetimes
 from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError,
                                  WrongTypeError)
 from coaty_bridge.liveness import CHANNEL as HEARTBEAT_CHANNEL, OBJECT_TYPE as HEARTBEAT_OBJECT_TYPE, Liveness
@@ -108,6 +109,11 @@ class BridgeConfig:
     # metres; fleet-wide. Adverts go out per square of the map and each bridge hears the 3 x 3
     # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet.
     footprint_area_size: float = 10.0
+    # metres; fleet-wide. An obstacle's monitoring updates (not its first share, not an update that only
+    # clears) go out under the square of its rectangle's centre, and each bridge hears the 3 x 3 squares
+    # around its robot; far robots get the first share, every clearing update and a renewal before their
+    # copy's lease runs out (issue 29; README "Obstacle areas"). 0 = every update to every robot.
+    obstacle_area_size: float = 10.0
     # metres; a footprint advert wider or longer than this is not a robot and is dropped
     max_footprint_extent: float = footprints.DEFAULT_MAX_FOOTPRINT_EXTENT
     # robot names whose footprint adverts are taken; empty = any robot (see README "Fleet robot
@@ -200,11 +206,12 @@ class BridgeConfig:
             fail("liveness_timeout", "must be at least twice heartbeat_interval (%g s)" % self.heartbeat_interval)
         if self.reconnect_max_delay < self.reconnect_min_delay:
             fail("reconnect_max_delay", "smaller than reconnect_min_delay")
-        area = self.footprint_area_size
-        if isinstance(area, bool) or not isinstance(area, (int, float)) or not (
-                area == 0 or footprints.MIN_AREA_SIZE <= area <= footprints.MAX_AREA_SIZE):
-            fail("footprint_area_size", "must be 0 (one area) or %g..%g m; all robots of a fleet need the same"
-                 % (footprints.MIN_AREA_SIZE, footprints.MAX_AREA_SIZE))
+        for name in ("footprint_area_size", "obstacle_area_size"):
+            area = getattr(self, name)
+            if isinstance(area, bool) or not isinstance(area, (int, float)) or not (
+                    area == 0 or footprints.MIN_AREA_SIZE <= area <= footprints.MAX_AREA_SIZE):
+                fail(name, "must be 0 (one area) or %g..%g m; all robots of a fleet need the same"
+                     % (footprints.MIN_AREA_SIZE, footprints.MAX_AREA_SIZE))
         extent = self.max_footprint_extent
         if isinstance(extent, bool) or not isinstance(extent, (int, float)) or not (
                 0.1 <= extent <= footprints.MAX_EXTENT):
@@ -291,6 +298,8 @@ def _make_paho_client(client_id):
 
 #: Requesters whose Discover token buckets are remembered (the quietest are forgotten beyond).
 _MAX_DISCOVER_REQUESTERS = 4096
+# obstacles whose fleet-wide expiry is kept before expired entries are swept (a flood cannot grow it for long)
+_MAX_FLEET_EXPIRIES = 100000
 
 #: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
 OWN_LOG_PER_OBSTACLE = 200
@@ -302,12 +311,17 @@ class CoatyBridgeClient:
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
 
-    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0, on_footprint=None, heartbeats=True):
+    def __init__(self, config, on_obstacle, clock=time.monotonic, qos=0, on_footprint=None, heartbeats=True,
+                 on_footprint_withdrawn=None):
         self.config = config
         self.identity_id = config.identity_id
         self._on_obstacle = on_obstacle
         # on_footprint(RobotFootprint, topic): a peer robot's footprint advert (fleet robots are never shared)
         self._on_footprint = on_footprint
+        # on_footprint_withdrawn(robot, topic): a peer took its footprint back (a Deadvertise of its advert
+        # series or of its agent: stopped, or its navigation went quiet), so it is forgotten at once
+        self._on_footprint_withdrawn = on_footprint_withdrawn
+        self._footprint_senders = {}   # sourceId -> (robot, advert objectId) of footprints heard
         self.footprint_object_id = new_uuid()
         self._clock = clock
         self._qos = qos
@@ -359,10 +373,21 @@ class CoatyBridgeClient:
             (subscription(ns, "DSC", two_way=True), qos),
             (subscription(ns, "RSV", two_way=True), qos),
             (subscription(ns, "CHN:" + HEARTBEAT_CHANNEL), qos),
+            (subscription(ns, "DAD"), qos),
         ]
-        # Footprint areas heard now (the 3 x 3 around the own robot); none until its position is known.
+        # Footprint and obstacle areas heard now (the 3 x 3 around the own robot, each at its own size);
+        # none until the robot's position is known.
         self._own_area = None
-        self._area_subscriptions = set()
+        # Until then it hears every one-level event of the namespace (every area's updates too), so that
+        # a robot without a known position (no footprint yet, a host without one) misses no update.
+        self._area_subscriptions = {subscription(ns, "+")} if config.obstacle_area_size > 0 else set()
+        self._obstacle_areas = set()
+        # Obstacle areas (issue 29): uuid -> clock time at which the copies of robots that hear only
+        # fleet-wide messages expire (the newest fleet-wide message's deadline), and this robot's pending
+        # renewals, uuid -> (due, update, sent_at): its last area-scoped update, sent fleet-wide before
+        # those copies would expire while the robots near the obstacle hold it longer.
+        self._fleet_expiry = {}
+        self._renewals = {}
         self.client_id = mqtt_client_id(self.identity_id)
         self._mqtt = _make_paho_client(self.client_id)
         self._mqtt.will_set(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=0)
@@ -453,6 +478,8 @@ class CoatyBridgeClient:
                 with self._source_drops_lock:
                     self._source_drops.flush(self._clock())
                 self.check_broker()
+                if self._connected:
+                    self.renew_due()
             except Exception as err:  # noqa: BLE001 - a log problem must not end the watch
                 LOG.error("%s: broker watch: %s: %s", self.config.robot_name, type(err).__name__, err)
 
@@ -548,8 +575,71 @@ class CoatyBridgeClient:
         self._count("published")
         self._count("bytes_published", len(payload))
         self._log_own(update)
-        self._send(self._obstacle_topic, payload, update=update)
+        area = self._scope_of(update)
+        if area is None:
+            self._count("published_fleet_wide")
+            self._sent_fleet_wide(update)
+            self._send(self._obstacle_topic, payload, update=update)
+        else:
+            self._count("published_to_area")
+            object_type = areas.area_object_type(self.config.object_type, area)
+            self._send(str(Topic(self.config.namespace, "ADV", self.identity_id, object_type=object_type)),
+                       self._obstacle_payload(update, object_type), update=update)
         return True
+
+    def _scope_of(self, update):
+        """The area an update goes to, or None for fleet-wide: a first share (every robot must plan around
+        it), an update that marks nothing (it may end the obstacle: far robots must stop avoiding it), and
+        any update while far robots hold no live copy this bridge knows of, go to every robot."""
+        size = self.config.obstacle_area_size
+        if size <= 0 or update.version <= 1 or not update.marked:
+            return None
+        now = self._clock()
+        with self._lock:
+            far = self._fleet_expiry.get(update.uuid)
+            if far is None or far <= now:
+                return None
+            if now + update.deadline > far:
+                # the robots near it will hold it longer than the far ones: renew theirs in time
+                margin = max(2.0, 0.1 * update.deadline)
+                self._renewals[update.uuid] = (max(now, far - margin), update, now)
+        return areas.area_of(areas.rectangle_centre(update.rectangle), size)
+
+    def _sent_fleet_wide(self, update, now=None):
+        """Every robot got ``update`` (sent or heard on the fleet-wide objectType): their copies live
+        until its deadline; a renewal it covers is dropped."""
+        now = self._clock() if now is None else now
+        expiry = now + update.deadline
+        with self._lock:
+            if expiry > self._fleet_expiry.get(update.uuid, -math.inf):
+                self._fleet_expiry[update.uuid] = expiry
+            renewal = self._renewals.get(update.uuid)
+            if renewal is not None and renewal[2] + renewal[1].deadline <= expiry + 1.0:
+                del self._renewals[update.uuid]
+            if len(self._fleet_expiry) > 4 * _MAX_FLEET_EXPIRIES:
+                for uuid in [u for u, t in self._fleet_expiry.items() if t <= now]:
+                    del self._fleet_expiry[uuid]
+
+    def renew_due(self):
+        """Sends, fleet-wide, the renewals that are due (the broker watch calls it every second); returns
+        how many went out. A renewal is this robot's last area-scoped update of the obstacle, aged."""
+        now = self._clock()
+        with self._lock:
+            due = [(u, r) for u, r in self._renewals.items() if r[0] <= now]
+            for uuid, _r in due:
+                del self._renewals[uuid]
+        sent = 0
+        for uuid, (_due, update, sent_at) in due:
+            fresh = lifetimes.aged(update, now - sent_at)
+            with self._lock:
+                covered = self._fleet_expiry.get(uuid, -math.inf) >= sent_at + update.deadline - 1.0
+            if fresh is None or covered:
+                continue
+            self._sent_fleet_wide(fresh, now)
+            self._send(self._obstacle_topic, self._obstacle_payload(fresh), update=fresh)
+            self._count("renewals_sent")
+            sent += 1
+        return sent
 
     def publish_footprint(self, footprint):
         """Advertises this robot's footprint (a RobotFootprint), under the objectType of the area
@@ -575,28 +665,43 @@ class CoatyBridgeClient:
         return True
 
     def note_own_position(self, point):
-        """This robot stands at ``point`` (x, y in the footprint frame): hear the footprint adverts
-        of the 3 x 3 areas around it. Called with every own footprint, advertised or not."""
-        size = self.config.footprint_area_size
-        if size <= 0:
+        """This robot stands at ``point`` (x, y in the map frame): hear the footprint adverts and the
+        obstacle updates of the 3 x 3 areas around it (each at its own size). Called with every own
+        footprint, advertised or not. Obstacle areas new to it are asked for the updates made there
+        while it was away (a Discover of those areas' objectTypes; each robot replays its own)."""
+        fp_size, ob_size = self.config.footprint_area_size, self.config.obstacle_area_size
+        key = (areas.area_of(point, fp_size) if fp_size > 0 else None,
+               areas.area_of(point, ob_size) if ob_size > 0 else None)
+        if key == (None, None) or key == self._own_area:
             return
-        area = footprints.area_of(point, size)
-        if area == self._own_area:
-            return
-        base, ns = self.config.footprint_object_type, self.config.namespace
-        wanted = {subscription(ns, "ADV::" + footprints.area_object_type(base, a))
-                  for a in footprints.areas_around(point, size)}
+        ns = self.config.namespace
+        wanted = set()
+        if fp_size > 0:
+            wanted |= {subscription(ns, "ADV::" + areas.area_object_type(self.config.footprint_object_type, a))
+                       for a in areas.areas_around(point, fp_size)}
+        obstacle_areas = areas.areas_around(point, ob_size) if ob_size > 0 else set()
+        wanted |= {subscription(ns, "ADV::" + areas.area_object_type(self.config.object_type, a))
+                   for a in obstacle_areas}
         with self._lock:
-            self._own_area = area
+            first = self._own_area is None
+            if key[0] != (self._own_area or (None, None))[0]:
+                self._counters["footprint_area_changes"] += 1
+            self._own_area = key
             old, self._area_subscriptions = self._area_subscriptions, wanted
-            self._counters["footprint_area_changes"] += 1
-            if self._connected:
+            new_obstacle_areas = sorted(obstacle_areas - self._obstacle_areas)
+            self._obstacle_areas = obstacle_areas
+            connected = self._connected
+            if connected:
                 # new ones first: a robot on the way in is heard from the first advert the broker has for it
                 added, gone = sorted(wanted - old), sorted(old - wanted)
                 if added:
                     self._mqtt.subscribe([(t, self._qos) for t in added])
                 if gone:
                     self._mqtt.unsubscribe(gone)
+        if connected and new_obstacle_areas and not first:
+            # the first position follows the connect's own Discover, which already asked for everything
+            self._discover_obstacles([areas.area_object_type(self.config.object_type, a) for a in new_obstacle_areas])
+            self._count("obstacle_area_discovers")
 
     def _log_own(self, update):
         with self._lock:
@@ -620,9 +725,9 @@ class CoatyBridgeClient:
                     del self._own_log[uuid]
         return replay
 
-    def _obstacle_payload(self, update):
+    def _obstacle_payload(self, update, object_type=None):
         return codec.advertise_payload(
-            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+            codec.obstacle_to_object(update, object_type or self.config.object_type, self.config.compact_indexes))
 
     def set_current_obstacles(self, updates, as_of=None):
         """The robot's current full obstacles, used to answer obstacle Discovers; their
@@ -669,7 +774,7 @@ class CoatyBridgeClient:
             else:
                 self._send(topic, payload)
 
-    def _discover_obstacles(self):
+    def _discover_obstacles(self, object_types=None):
         correlation_id = new_uuid()
         now = self._clock()
         with self._lock:
@@ -677,7 +782,8 @@ class CoatyBridgeClient:
             self._pending_discovers = {c: t for c, t in self._pending_discovers.items() if now - t < window}
             self._pending_discovers[correlation_id] = now
         topic = Topic(self.config.namespace, "DSC", self.identity_id, correlation_id=correlation_id)
-        self._send(str(topic), codec.discover_object_types_payload([self.config.object_type]), queue=False)
+        self._send(str(topic), codec.discover_object_types_payload(object_types or [self.config.object_type]),
+                   queue=False)
         self._count("discovers_sent")
 
     # ------------------------------------------------------- paho callbacks
@@ -770,8 +876,8 @@ class CoatyBridgeClient:
             except CoatyError:
                 return ""
             key = topic.source_id or ""
-            limited = topic.event == "ADV" and topic.object_type == self.config.object_type \
-                and key != self.identity_id
+            limited = topic.event == "ADV" and topic.object_type is not None and key != self.identity_id \
+                and areas.is_scoped_object_type(topic.object_type, self.config.object_type)
             if len(self._admit_cache) >= 4096:
                 self._admit_cache.clear()
             known = self._admit_cache[topic_text] = (key, limited)   # a flood repeats one topic
@@ -852,10 +958,22 @@ class CoatyBridgeClient:
                 return
             data = codec.parse_payload(payload, self.config.limits)
             if topic.event == "ADV" and topic.object_type == self.config.object_type:
-                self._deliver(codec.decode_advertise(data, self.config.object_type, self.config.limits), topic)
+                update = codec.decode_advertise(data, self.config.object_type, self.config.limits)
+                self._sent_fleet_wide(update)
+                self._deliver(update, topic)
+            elif topic.event == "ADV" and areas.parse_area(topic.object_type, self.config.object_type) is not None:
+                self._count("received_from_area")
+                self._deliver(codec.decode_advertise(data, topic.object_type, self.config.limits), topic)
             elif topic.event == "ADV" and topic.object_type is not None and footprints.is_footprint_object_type(
                     topic.object_type, self.config.footprint_object_type):
-                self._deliver_footprint(footprints.decode_footprint_advertise(data, topic.object_type), topic)
+                footprint = footprints.decode_footprint_advertise(data, topic.object_type)
+                if self._deliver_footprint(footprint, topic):
+                    with self._lock:
+                        if len(self._footprint_senders) < 4096 or topic.source_id in self._footprint_senders:
+                            self._footprint_senders[topic.source_id] = (footprint.robot,
+                                                                        data["object"]["objectId"].lower())
+            elif topic.event == "DAD":
+                self._on_deadvertise(topic, codec.decode_deadvertise(data))
             elif topic.event == "DSC":
                 self._answer_discover(topic, codec.decode_discover(data, self.identity_id,
                                                                    self.config.object_type))
@@ -926,13 +1044,40 @@ class CoatyBridgeClient:
             return
         self._count("footprints_received")
         if self._on_footprint is None:
-            return
+            return True
         try:
             self._on_footprint(footprint, topic)
         except Exception as err:
             self._count("dropped.delivery_error")
             LOG.error("%s: could not deliver the footprint of %s: %s: %s", self.config.robot_name,
                       footprint.robot, type(err).__name__, err)
+        return True
+
+    def _on_deadvertise(self, topic, object_ids):
+        """A Deadvertise: when it names a footprint sender's agent or advert series, that robot is gone."""
+        with self._lock:
+            known = self._footprint_senders.get(topic.source_id)
+            if known is None or not ({topic.source_id, known[1]} & set(object_ids)):
+                self._counters["ignored"] += 1
+                return
+            del self._footprint_senders[topic.source_id]
+        self._count("footprints_withdrawn")
+        if self._on_footprint_withdrawn is not None:
+            try:
+                self._on_footprint_withdrawn(known[0], topic)
+            except Exception as err:
+                self._count("dropped.delivery_error")
+                LOG.error("%s: could not withdraw the footprint of %s: %s: %s", self.config.robot_name,
+                          known[0], type(err).__name__, err)
+
+    def withdraw_footprint(self):
+        """Takes this robot's footprint back (a Deadvertise of its advert series): peers forget it now,
+        not when a parked advert's validFor runs out. Returns False when not connected."""
+        if not self._connected:
+            return False
+        self._count("footprints_withdrawn_sent")
+        self._send(self._dad_topic, codec.deadvertise_payload([self.footprint_object_id]), queue=False)
+        return True
 
     def _discover_allowed(self, requester):
         """True when a Discover from `requester` may be answered now (its own token bucket; the
@@ -950,6 +1095,16 @@ class CoatyBridgeClient:
         if request.identity:
             self._send(reply, codec.resolve_payload(self._identity), queue=False)
             self._count("resolves_sent")
+        if request.areas and not request.obstacles:
+            # a robot entering these areas: the updates it did not hear there (each robot replays its own)
+            size = self.config.obstacle_area_size
+            for update in self._replayable_own_updates():
+                if size > 0 and areas.area_of(areas.rectangle_centre(update.rectangle), size) in request.areas:
+                    payload = codec.resolve_payload(
+                        codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+                    if len(payload) <= self.config.max_payload_bytes:
+                        self._send(reply, payload, queue=False)
+                        self._count("resolves_sent")
         if request.obstacles:
             for update in self._replayable_own_updates():
                 payload = codec.resolve_payload(

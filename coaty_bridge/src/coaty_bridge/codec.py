@@ -5,7 +5,7 @@ one object per obstacle: objectId is the obstacle uuid, every update of the
 obstacle re-advertises it with a higher version)::
 
     {"objectType": "org.fleetsharing.SharedObstacle", "coreType": "CoatyObject",
-     "objectId": <uuid>, "name": "SharedObstacle <uuid>",
+     "objectId": <uuid>, "name": "SharedObstacle <first 8 of uuid>",
      "uuid": <uuid>, "source": "robot_0", "version": 3, "stamp": 1700000000.25,
      "frameId": "map", "deadline": 60, "rectangle": [min_x, min_y, max_x, max_y],
      "resolution": 0.05, "origin": [x, y], "size": [size_x, size_y],
@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Optional, Tuple
 
 from coaty_bridge import compact
+from coaty_bridge.areas import parse_area
 from coaty_bridge.errors import (CoatyError, InvalidJsonError, InvalidPayloadError, MissingFieldError,
                                  NonFiniteNumberError, OutOfRangeError, PayloadTooLargeError,
                                  TooManyIndexesError, WrongTypeError)
@@ -260,7 +261,7 @@ def obstacle_to_object(update, object_type=DEFAULT_OBJECT_TYPE, compact_indexes=
         "objectType": object_type,
         "coreType": "CoatyObject",
         "objectId": update.uuid,
-        "name": "SharedObstacle %s" % update.uuid,
+        "name": "SharedObstacle %s" % update.uuid[:8],   # for people reading the traffic; the uuid is in objectId
         "uuid": update.uuid,
         "source": update.source,
         "version": update.version,
@@ -342,6 +343,24 @@ def deadvertise_payload(object_ids):
     return dump({"objectIds": list(object_ids)})
 
 
+#: objectIds one Deadvertise may name
+MAX_DEADVERTISE_IDS = 1000
+
+
+def decode_deadvertise(data):
+    """Deadvertise payload dict -> the objectIds (lower-case UUIDs) it names; raises
+    InvalidPayloadError when malformed."""
+    if not isinstance(data, dict) or "objectIds" not in data:
+        raise MissingFieldError("Deadvertise without objectIds")
+    ids = data["objectIds"]
+    if not isinstance(ids, list) or not 1 <= len(ids) <= MAX_DEADVERTISE_IDS:
+        raise WrongTypeError("Deadvertise objectIds %s is not a list of 1..%d UUIDs" % (_short(ids), MAX_DEADVERTISE_IDS))
+    for object_id in ids:
+        if not _is_uuid(object_id):
+            raise WrongTypeError("Deadvertise objectId %s is not a UUID" % _short(object_id))
+    return tuple(i.lower() for i in ids)
+
+
 def discover_object_types_payload(object_types):
     return dump({"objectTypes": list(object_types)})
 
@@ -350,11 +369,17 @@ def resolve_payload(obj):
     return dump({"object": obj})
 
 
+#: objectTypes one Discover may name (a robot asks for the 3 x 3 obstacle areas it enters, at most 9)
+_MAX_DISCOVER_AREAS = 64
+
+
 @dataclass(frozen=True)
 class DiscoverRequest:
-    """What a Discover asks of us: our Identity, our obstacles, or neither."""
+    """What a Discover asks of us: our Identity, our obstacles (all, or those in some areas: the
+    ``<object_type>.area_<ix>_<iy>`` objectTypes it names), or neither."""
     identity: bool
     obstacles: bool
+    areas: frozenset = frozenset()
 
 
 def decode_discover(data, identity_id, object_type):
@@ -381,6 +406,10 @@ def decode_discover(data, identity_id, object_type):
     if "objectId" not in data and "externalId" not in data:
         identity = IDENTITY_OBJECT_TYPE in object_types or IDENTITY_CORE_TYPE in core_types
         obstacles = object_type in object_types
+        named = frozenset(a for a in (parse_area(t, object_type) for t in object_types) if a is not None)
+        if len(named) > _MAX_DISCOVER_AREAS:
+            raise OutOfRangeError("Discover names %d obstacle areas (at most %d)" % (len(named), _MAX_DISCOVER_AREAS))
+        return DiscoverRequest(identity=identity, obstacles=obstacles, areas=frozenset() if obstacles else named)
     return DiscoverRequest(identity=identity, obstacles=obstacles)
 
 

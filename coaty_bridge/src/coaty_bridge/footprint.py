@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Tuple
 
+from coaty_bridge.areas import area_object_type, area_of, areas_around, is_scoped_object_type  # noqa: F401
 from coaty_bridge.errors import (InvalidNameError, MissingFieldError, NonFiniteNumberError,
                                  OutOfRangeError, WrongTypeError)
 from coaty_bridge.topics import _NAME_RE, _UUID_RE
@@ -47,10 +48,13 @@ MAX_COORDINATE = 1.0e6
 #: ROS time range (seconds), as for obstacles.
 MAX_STAMP = float(2 ** 32 - 1)
 MAX_TEXT = 256
+#: Longest ``validFor`` a receiver takes, s: a parked robot's advert keeps it known at most this long.
+MAX_VALID_FOR = 600.0
+#: A parked robot's advert is valid for this many of its advert intervals (one lost advert is no gap).
+PARKED_VALIDITY = 2.5
 #: footprint_area_size bounds, m (0 is allowed too: no areas).
 MIN_AREA_SIZE = 1.0
 MAX_AREA_SIZE = 10000.0
-_AREA_MARK = ".area_"
 
 
 def _short(value):
@@ -74,8 +78,15 @@ class RobotFootprint:
     stamp: float
     frame_id: str
     points: Tuple[Tuple[float, float], ...]
+    # s the receivers keep it without a newer advert; 0: their own robot_timeout. A parked robot
+    # advertises rarely and says so (issue 29).
+    valid_for: float = 0.0
 
     def __post_init__(self):
+        valid_for = _finite_number("validFor", self.valid_for)
+        if not 0.0 <= valid_for <= MAX_VALID_FOR:
+            raise OutOfRangeError("validFor %r outside [0, %g] s" % (valid_for, MAX_VALID_FOR))
+        object.__setattr__(self, "valid_for", valid_for)
         if not isinstance(self.robot, str) or not _NAME_RE.match(self.robot) or len(self.robot) > MAX_TEXT:
             raise InvalidNameError("robot %s is not a Coaty name (1..%d characters, no NUL, '/', '+' or '#')"
                                    % (_short(self.robot), MAX_TEXT))
@@ -111,7 +122,7 @@ class RobotFootprint:
 
 def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
     """RobotFootprint -> CoatyObject dict."""
-    return {
+    obj = {
         "objectType": object_type,
         "coreType": "CoatyObject",
         "objectId": object_id,
@@ -122,6 +133,9 @@ def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJE
         # millimetres: the layers' cells are centimetres wide, and full float64 digits double the bytes
         "footprint": [[round(x, 3), round(y, 3)] for x, y in footprint.points],
     }
+    if footprint.valid_for > 0:
+        obj["validFor"] = footprint.valid_for
+    return obj
 
 
 def footprint_from_object(obj, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
@@ -145,7 +159,7 @@ def footprint_from_object(obj, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
     if not isinstance(obj["frameId"], str):
         raise WrongTypeError("frameId %s is not a string" % _short(obj["frameId"]))
     return RobotFootprint(robot=obj["robot"], stamp=obj["stamp"], frame_id=obj["frameId"],
-                          points=obj["footprint"])
+                          points=obj["footprint"], valid_for=obj.get("validFor", 0.0))
 
 
 def decode_footprint_advertise(data, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
@@ -163,34 +177,9 @@ def footprint_payload(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJECT
                       separators=(",", ":"), allow_nan=False).encode("utf-8")
 
 
-def area_of(point, area_size):
-    """The (ix, iy) square of side ``area_size`` holding ``point`` (x, y)."""
-    return (math.floor(point[0] / area_size), math.floor(point[1] / area_size))
-
-
-def area_object_type(object_type, area):
-    """The objectType adverts of robots standing in ``area`` go out under."""
-    return "%s%s%d_%d" % (object_type, _AREA_MARK, area[0], area[1])
-
-
-def areas_around(point, area_size):
-    """The 3 x 3 squares around ``point``: every robot within area_size along both axes stands
-    in one of them."""
-    ix, iy = area_of(point, area_size)
-    return {(ix + dx, iy + dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)}
-
-
 def is_footprint_object_type(candidate, object_type):
     """True for ``object_type`` itself and for any ``<object_type>.area_<ix>_<iy>``."""
-    if candidate == object_type:
-        return True
-    if not candidate.startswith(object_type + _AREA_MARK):
-        return False
-    parts = candidate[len(object_type) + len(_AREA_MARK):].split("_")
-    try:
-        return len(parts) == 2 and all(str(int(p)) == p for p in parts)
-    except ValueError:
-        return False
+    return is_scoped_object_type(candidate, object_type)
 
 
 @dataclass(frozen=True)
@@ -249,12 +238,80 @@ class FleetRobotTable:
         """Forgets robots not heard within timeout (or heard 'in the future': a clock that went
         back); returns their names, sorted."""
         now = self._clock()
-        keep = {name: r for name, r in self._robots.items() if abs(now - r.heard_at) <= self.timeout}
+        keep = {name: r for name, r in self._robots.items()
+                if abs(now - r.heard_at) <= max(self.timeout, r.footprint.valid_for)}
         gone = sorted(set(self._robots) - set(keep))
         self._robots = keep
         return gone
+
+    def forget(self, robot):
+        """Forgets ``robot`` now (it withdrew its footprint); False when it was not known."""
+        if robot not in self._robots:
+            return False
+        self._robots = {name: r for name, r in self._robots.items() if name != robot}
+        return True
 
     def robots(self) -> List[HeardRobot]:
         """The known robots, by name."""
         robots = self._robots
         return [robots[name] for name in sorted(robots)]
+
+
+def largest_move(a, b):
+    """How far (m) the farthest-moving vertex went from footprint ``a`` to ``b`` (inf when their
+    vertex counts differ): a turn on the spot moves the corners, not the centroid."""
+    if a is None or len(a) != len(b):
+        return math.inf
+    return max(math.hypot(q[0] - p[0], q[1] - p[1]) for p, q in zip(a, b))
+
+
+class AdvertSchedule:
+    """When this robot advertises its footprint (issue 29: adverts were 40 % of the fleet's bytes).
+
+    - at once when a vertex moved ``min_move`` since the last advert (a peer's view lags by at most that);
+    - while moving (such an advert within ``parked_after`` s), at ``rate`` as a heartbeat;
+    - parked, every ``parked_interval`` s, each advert valid for PARKED_VALIDITY times that, so the
+      peers keep the robot between them (``validFor`` on the wire; older receivers use their own
+      robot_timeout, and forget a parked robot between adverts).
+    ``parked_interval`` 0 (or ``min_move`` 0: motion is not watched) keeps the rate at all times.
+    Pure: the caller passes the time and sends what it is told; ``sent`` records it."""
+
+    def __init__(self, rate, min_move, parked_interval, parked_after=2.0):
+        self.rate, self.min_move = float(rate), float(min_move)
+        self.parked_interval, self.parked_after = float(parked_interval), float(parked_after)
+        self._last_points = None
+        self._last_time = None
+        self._last_valid_for = 0.0
+        self._last_motion = -math.inf
+
+    def on_footprint(self, points, now):
+        """A new own footprint: the validFor of an advert to send now (a motion advert), or None."""
+        if self.min_move <= 0 or self._last_points is None:
+            return None
+        if largest_move(self._last_points, points) >= self.min_move:
+            self._last_motion = now
+            return 0.0
+        return None
+
+    def on_tick(self, points, now):
+        """The ``rate`` tick: the validFor of an advert to send now, or None to skip this tick."""
+        if self._last_time is None or largest_move(self._last_points, points) >= max(self.min_move, 1e-9):
+            if self._last_points is not None and self.min_move > 0:
+                self._last_motion = now
+            return 0.0
+        since = now - self._last_time
+        parked = self.parked_interval > 0 and self.min_move > 0 and now - self._last_motion >= self.parked_after
+        if not parked:
+            # skipped when a motion advert went out since the previous tick
+            return 0.0 if not 0.0 <= since < 0.75 / self.rate else None
+        if self._last_valid_for <= 0 or not 0.0 <= since < self.parked_interval:
+            return PARKED_VALIDITY * self.parked_interval
+        return None
+
+    @property
+    def last_valid_for(self):
+        """validFor of the last advert sent (0 before any, or when it was not a parked one)."""
+        return self._last_valid_for
+
+    def sent(self, points, now, valid_for):
+        self._last_points, self._last_time, self._last_valid_for = tuple(points), now, valid_for

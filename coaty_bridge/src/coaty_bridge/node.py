@@ -7,6 +7,7 @@
     fleet (footprint Advertise)             -> fleet_robots (RobotFootprintArray, latched, 2 Hz)
     /diagnostics                            <- counters, once a second
 """
+import dataclasses
 import logging
 import os
 import sys
@@ -24,7 +25,8 @@ from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.security import read_password_file
-from coaty_bridge.footprint import FleetRobotTable, RobotFootprint as FootprintValue, centroid, moved
+from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotTable, MAX_VALID_FOR,
+                                    RobotFootprint as FootprintValue, centroid)
 
 LOG = logging.getLogger(__name__)
 
@@ -33,6 +35,7 @@ _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "i
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "max_obstacle_extent", "max_obstacle_cells", "compact_indexes", "keepalive", "reconnect_min_delay",
            "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "authenticate_sources", "footprint_area_size",
+           "obstacle_area_size",
            "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
            "liveness_timeout", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")
 
@@ -88,11 +91,13 @@ class FootprintConfig:
     """The node's footprint parameters (fleet robots are never shared); ValueError names a bad one."""
 
     def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True,
-                 min_move=0.1):
+                 min_move=0.1, parked_interval=10.0):
         if not isinstance(topic, str) or not topic:
             raise ValueError("parameter footprint_topic = %r: must be a topic name" % (topic,))
         for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0),
-                                       ("footprint_min_move", min_move, 0.0, 10.0)):
+                                       ("footprint_min_move", min_move, 0.0, 10.0),
+                                       ("footprint_parked_interval", parked_interval, 0.0,
+                                        MAX_VALID_FOR / PARKED_VALIDITY)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
                 raise ValueError("parameter %s = %r: must be %g..%g" % (name, value, low, high))
         if not isinstance(advertise, bool):
@@ -102,6 +107,10 @@ class FootprintConfig:
                              "robot would be forgotten between adverts" % (robot_timeout, rate))
         self.topic, self.rate, self.robot_timeout, self.advertise = topic, float(rate), float(robot_timeout), advertise
         self.min_move = float(min_move)
+        self.parked_interval = float(parked_interval)
+
+    def schedule(self):
+        return AdvertSchedule(self.rate, self.min_move, self.parked_interval)
 
     @classmethod
     def from_params(cls):
@@ -109,7 +118,8 @@ class FootprintConfig:
                    rate=rospy.get_param("~footprint_rate", 2.0),
                    robot_timeout=rospy.get_param("~robot_timeout", 3.0),
                    advertise=rospy.get_param("~advertise_footprint", True),
-                   min_move=rospy.get_param("~footprint_min_move", 0.1))
+                   min_move=rospy.get_param("~footprint_min_move", 0.1),
+                   parked_interval=rospy.get_param("~footprint_parked_interval", 10.0))
 
 
 def polygon_to_footprint(msg, robot, now):
@@ -211,7 +221,7 @@ class BridgeNode:
         self._counters = {}
         self._sender_drops_reported = {}   # per-sender drop counters at the last diagnostics
         self._own_footprint = None   # (RobotFootprint, ROS time it arrived)
-        self._advertised = None      # (centroid, ROS time) of the last own advert sent
+        self._adverts = self.footprint_config.schedule()   # when to advertise the own footprint
         self._stale_logged = False
         self.fleet = FleetRobotTable(config.robot_name, self.footprint_config.robot_timeout, rospy.get_time)
         # A message that cannot be delivered is dropped there; the publisher stays usable.
@@ -219,7 +229,8 @@ class BridgeNode:
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
             topic="%s/from_fleet" % config.robot_name)
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
-        self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint)
+        self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint,
+                                        on_footprint_withdrawn=self._on_fleet_footprint_withdrawn)
         self.fleet_robots = rospy.Publisher("fleet_robots", RobotFootprintArray, queue_size=2, latch=True)
         rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
         rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self._on_obstacle_list, queue_size=2)
@@ -283,16 +294,17 @@ class BridgeNode:
         self.client.note_own_position(centroid(footprint.points))
         # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
         # at most min_move (plus transport), not by a whole heartbeat period of driving.
-        if self.footprint_config.advertise and self.footprint_config.min_move > 0.0:
+        if self.footprint_config.advertise:
             with self._lock:
-                last = self._advertised
-            if last is not None and moved(last[0], centroid(footprint.points)) >= self.footprint_config.min_move:
-                self._advertise(footprint, now)
+                valid_for = self._adverts.on_footprint(footprint.points, now)
+            if valid_for is not None:
+                self._advertise(footprint, now, valid_for)
 
-    def _advertise(self, footprint, now):
+    def _advertise(self, footprint, now, valid_for):
+        footprint = dataclasses.replace(footprint, valid_for=valid_for)
         if self.client.publish_footprint(footprint):
             with self._lock:
-                self._advertised = (centroid(footprint.points), now)
+                self._adverts.sent(footprint.points, now, valid_for)
 
     def _on_fleet_footprint(self, footprint, topic):
         """MQTT thread: a peer's footprint advert (already validated)."""
@@ -307,6 +319,13 @@ class BridgeNode:
                 # At once, not at the next tick: a driving robot's footprint a tick old has moved on.
                 self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time()))
 
+    def _on_fleet_footprint_withdrawn(self, robot, topic):
+        """MQTT thread: a peer took its footprint back (stopped, or its navigation went quiet)."""
+        if self.fleet.forget(robot):
+            rospy.loginfo("%s: fleet robot %s withdrew its footprint (sourceId %s)", self.config.robot_name, robot,
+                          topic.source_id)
+            self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time()))
+
     def _footprint_tick(self, _event=None):
         """At footprint_rate: advertise this robot's footprint while it is fresh, forget silent fleet
         robots, publish the fleet robots for the layer."""
@@ -314,16 +333,21 @@ class BridgeNode:
         own = self._own_footprint
         if self.footprint_config.advertise and own is not None:
             age = now - own[1]
-            with self._lock:
-                last = self._advertised
             if 0.0 <= age <= self.footprint_config.robot_timeout:
-                # The heartbeat: skipped when a motion advert went out since the previous tick.
-                if last is None or not 0.0 <= now - last[1] < 0.75 / self.footprint_config.rate:
-                    self._advertise(own[0], now)
+                # The heartbeat: at the rate while moving, rarely while parked (AdvertSchedule).
+                with self._lock:
+                    valid_for = self._adverts.on_tick(own[0].points, now)
+                if valid_for is not None:
+                    self._advertise(own[0], now, valid_for)
                 self._stale_logged = False
             elif not self._stale_logged:
                 self._stale_logged = True
                 self._count("footprint_stale")
+                # peers keep a parked robot for its advert's validFor: tell them it is gone now
+                with self._lock:
+                    parked = self._adverts.last_valid_for > 0
+                if parked:
+                    self.client.withdraw_footprint()
                 rospy.logwarn("%s: no footprint on %s for %.1f s; not advertising an old pose",
                               self.config.robot_name, self.footprint_config.topic, age)
         for name in self.fleet.expire():
