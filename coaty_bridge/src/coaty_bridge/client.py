@@ -101,7 +101,7 @@ class BridgeConfig:
     source_queue_size: int = 1000
     # s: end-to-end liveness (liveness.py): an echo (only we receive it) this often, ERROR when it is
     # not echoed for liveness_timeout s (issue 27, attack 6); a heartbeat every peer receives each
-    # peer_heartbeat_interval s (0: automatic, 2.5 s per peer known, at least heartbeat_interval;
+    # peer_heartbeat_interval s (0: automatic, 3 s per peer known, at least heartbeat_interval;
     # issue 29), WARN when a peer's is missing for 3 of its intervals (at least liveness_timeout)
     heartbeat_interval: float = 1.0
     liveness_timeout: float = 3.0

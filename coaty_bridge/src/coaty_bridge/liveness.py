@@ -31,6 +31,7 @@ Each bridge checks:
 Pure Python, no paho; the clock is injected (tests advance it, nothing sleeps).
 """
 import json
+import random
 import threading
 
 OK, WARN, ERROR = 0, 1, 2
@@ -40,9 +41,12 @@ ECHO_CHANNEL = "org.fleetsharing.Echo"
 ECHO_OBJECT_TYPE = "org.fleetsharing.Echo"
 
 # automatic peer heartbeat interval (peer_heartbeat_interval 0): this many s per peer known. Each
-# robot then receives about one peer heartbeat per AUTO_SECONDS_PER_PEER s (~220 bytes each:
-# ~5.3 kB/min) at any fleet size; with the 1 s echo (~8.8 kB/min) below the 15 kB/min budget.
-AUTO_SECONDS_PER_PEER = 2.5
+# robot then receives about one peer heartbeat per 0.9 x AUTO_SECONDS_PER_PEER s (~220 bytes each:
+# ~4.9 kB/min) at any fleet size; with the 1 s echo (~8.6 kB/min) below the 15 kB/min budget.
+AUTO_SECONDS_PER_PEER = 3.0
+# the next peer heartbeat goes out after a random JITTER..1 of the interval (which is announced as
+# the longest wait): robots that started or reconnected together do not stay in step
+JITTER = 0.8
 # a peer is missed when silent for this many of its announced intervals (two lost in a row are not
 # a partition), and never sooner than liveness_timeout
 PEER_TIMEOUT_INTERVALS = 3
@@ -90,7 +94,8 @@ def _round_interval(value):
 
 
 class Liveness:
-    def __init__(self, robot, clock, timeout=3.0, known_robots=(), heartbeat_interval=1.0, peer_interval=0.0):
+    def __init__(self, robot, clock, timeout=3.0, known_robots=(), heartbeat_interval=1.0, peer_interval=0.0,
+                 rng=None):
         self.robot = robot
         self.timeout = float(timeout)
         self.heartbeat_interval = float(heartbeat_interval)
@@ -103,8 +108,9 @@ class Liveness:
         self._last_sent = None
         self._last_echo = None     # time the newest echo arrived
         self._echoed_seq = 0
-        self._peer_sent = None     # time the last peer heartbeat went out (None: due now)
-        self._interval = None      # the interval announced in it
+        self._rng = rng or random.Random()
+        self._next_peer = None     # time the next peer heartbeat is due (None: now)
+        self._interval = None      # the interval announced in the last one
         # robot -> (time heard, announced interval, misses us, heard count)
         self._peers = {}
         self._expected = set(r for r in known_robots if r != robot)
@@ -135,12 +141,11 @@ class Liveness:
                 del self._sent[old]
             self._last_sent = now
             if peer is None:
-                peer = self._peer_sent is None or \
-                    now - self._peer_sent >= self._interval - 0.5 * self.heartbeat_interval
+                peer = self._next_peer is None or now >= self._next_peer - 0.5 * self.heartbeat_interval
             if not peer:
                 return self._seq, None
-            self._peer_sent = now
             self._interval = self._peer_interval_locked()
+            self._next_peer = now + self._interval * self._rng.uniform(JITTER, 1.0)
             heard = 0
             misses = []
             for robot in sorted(set(self._peers) | self._expected):
@@ -187,7 +192,7 @@ class Liveness:
         with self._lock:
             self._started = self._clock()
             self._last_echo = None
-            self._peer_sent = None
+            self._next_peer = None
 
     # ----------------------------------------------------------- verdict
 
