@@ -458,7 +458,8 @@ def test_bad_heartbeats_are_counted_and_dropped():
     client.handle("coaty/3/%s/CHN:%s/5f0e1c4e-8a57-4f6e-9a8e-0a1b2c3d4e5f" % (ns, liveness.ECHO_CHANNEL),
                   liveness.echo_payload("5f0e1c4e-8a57-4f6e-9a8e-0a1b2c3d4e5f", 1))
     assert client.counters()["ignored"] == 1
-    client.handle(client._echo_topic, b'{"object": {"objectType": "%s", "seq": "x"}}' % liveness.ECHO_OBJECT_TYPE.encode())
+    client.handle(client._echo_topic,
+                  b'{"object": {"objectType": "%s", "seq": "x"}}' % liveness.ECHO_OBJECT_TYPE.encode())
     assert client.counters()["dropped.wrong_type"] == 9   # 8 above and this echo
     # a heartbeat of the first design is still taken (a fleet half upgraded)
     client.handle(topic, _heartbeat(interval=None, heard=None, hears=["robot_0"]))
