@@ -320,8 +320,9 @@ class FakeFleet:
             return
         route = self._routes.get(topic)
         if route is None:
-            route = self._routes[topic] = [c for c in self.clients
-                                           if any(mqtt.topic_matches_sub(sub, topic) for sub, _q in c._subscriptions)]
+            route = self._routes[topic] = [c for c in self.clients if any(
+                mqtt.topic_matches_sub(sub, topic)
+                for sub in [s for s, _q in c._subscriptions] + sorted(c._area_subscriptions))]
         kind = topic.split("/")[3]
         self.deliveries += len(route)
         if self.max_deliveries is not None and self.deliveries > self.max_deliveries:
@@ -372,7 +373,7 @@ def test_heartbeats_cost_at_most_15_kB_per_robot_per_minute_at_100_robots():
                                                   by_kind))
     assert max(per_minute.values()) <= BUDGET_BYTES_PER_MINUTE, by_kind
     print("messages delivered in 1200 s: %d" % fleet.deliveries)
-    assert set(by_kind) == {"CHN:org.fleetsharing.Echo", "CHN:org.fleetsharing.Heartbeat"}
+    assert set(by_kind) == {"CHN:org.fleetsharing.Echo", "CHN:org.fleetsharing.Heartbeat"}, by_kind
     interval = 99 * liveness.AUTO_SECONDS_PER_PEER
     for client in fleet.clients:
         assert client.liveness.status() == (liveness.OK, ""), client.config.robot_name
@@ -455,7 +456,8 @@ def test_bad_heartbeats_are_counted_and_dropped():
         assert client.counters().get("dropped." + reason, 0) == before + 1, (payload[:120], client.counters())
     assert "robot_1" not in client.liveness._peers
     # somebody else's echo (we subscribe to our own only) is ignored; a bad own echo is dropped
-    client.handle("coaty/3/%s/CHN:%s/5f0e1c4e-8a57-4f6e-9a8e-0a1b2c3d4e5f" % (ns, liveness.ECHO_CHANNEL),
+    client.handle("coaty/3/%s/CHN:%s/5f0e1c4e-8a57-4f6e-9a8e-0a1b2c3d4e5f" % (liveness.echo_namespace(ns),
+                                                                            liveness.ECHO_CHANNEL),
                   liveness.echo_payload("5f0e1c4e-8a57-4f6e-9a8e-0a1b2c3d4e5f", 1))
     assert client.counters()["ignored"] == 1
     client.handle(client._echo_topic,
@@ -480,10 +482,18 @@ def test_peer_heartbeat_interval_is_checked():
 @pytest.mark.broker
 def test_the_echo_reaches_its_sender_only(broker, wait_for):
     """Through a real mosquitto: each robot hears its own echoes; the peer hears none of them,
-    only the peer heartbeats (the first one, then each peer_heartbeat_interval)."""
+    only the peer heartbeats (the first one, then each peer_heartbeat_interval), and neither does
+    a subscriber of every event of the fleet's namespace (coaty/+/<ns>/+/+ and two-way)."""
     clock = test_peer_authority.Clock()
     robots = [Robot(name, broker.url, clock) for name in ("robot_0", "robot_1")]
     heard = {r.name: [] for r in robots}
+    ns = robots[0].client.config.namespace
+    everything = []
+    catch_all = mqtt.Client(client_id="catch-all")
+    catch_all.on_message = lambda c, u, m: everything.append(m.topic)
+    catch_all.on_connect = lambda c, u, f, rc: c.subscribe([("coaty/+/%s/+/+" % ns, 0), ("coaty/+/%s/+/+/+" % ns, 0)])
+    catch_all.connect("127.0.0.1", broker.port)
+    catch_all.loop_start()
     for robot in robots:
         client = robot.client
         client.config = BridgeConfig(robot.name, broker_url=broker.url, peer_heartbeat_interval=10.0)
@@ -508,7 +518,11 @@ def test_the_echo_reaches_its_sender_only(broker, wait_for):
             assert own_echo not in heard[peer.name]
             assert not any(liveness.ECHO_CHANNEL in t and robot.client.identity_id in t for t in heard[peer.name])
             assert robot.client.counters().get("echoes_sent", 0) >= 5
+        wait_for(lambda: any(liveness.CHANNEL in t for t in everything), what="the catch-all hears heartbeats")
+        assert not any(liveness.ECHO_CHANNEL in t for t in everything)
     finally:
+        catch_all.loop_stop()
+        catch_all.disconnect()
         for robot in robots:
             robot.client.stop(timeout=0.5)
 

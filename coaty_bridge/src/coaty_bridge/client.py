@@ -361,8 +361,10 @@ class CoatyBridgeClient:
                                  config.heartbeat_interval, config.peer_heartbeat_interval)
         ns = config.namespace
         self._heartbeat_topic = str(Topic(ns, "CHN", self.identity_id, filter=HEARTBEAT_CHANNEL))
-        # the echo goes to a topic only we subscribe to (exactly, no wildcard): peers never receive it
-        self._echo_topic = str(Topic(ns, "CHN", self.identity_id, filter=ECHO_CHANNEL))
+        # the echo goes to a topic only we subscribe to (exactly, no wildcard), in a namespace of its own
+        # so that no subscription of the fleet's namespace (coaty/+/<ns>/+/+ included) catches it
+        self._echo_namespace = liveness_rules.echo_namespace(ns)
+        self._echo_topic = str(Topic(self._echo_namespace, "CHN", self.identity_id, filter=ECHO_CHANNEL))
         self._identity = codec.identity_object(self.identity_id, config.robot_name)
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
         self._footprint_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.footprint_object_type))
@@ -895,7 +897,7 @@ class CoatyBridgeClient:
                     and topic.namespace == self.config.namespace:
                 self._on_heartbeat(topic, payload)   # our own included: the echo is the point
                 return
-            if topic.event == "CHN" and topic.filter == ECHO_CHANNEL and topic.namespace == self.config.namespace:
+            if topic.event == "CHN" and topic.filter == ECHO_CHANNEL and topic.namespace == self._echo_namespace:
                 self._on_echo(topic, payload)
                 return
             if topic.source_id == self.identity_id:

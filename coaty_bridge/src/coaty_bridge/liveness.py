@@ -6,8 +6,10 @@ Two kinds of Coaty Channel events, which Coaty agents that do not observe these 
 (issue 29: the first design, a 1 s heartbeat from every robot to every robot listing all robots
 heard, cost each robot 2.75 MB per minute at 100 robots):
 
-- an **echo** each ``heartbeat_interval`` s on ``CHN:org.fleetsharing.Echo/<own sourceId>``, which
-  only its sender subscribes to (that exact topic): a minimal CoatyObject with a sequence number.
+- an **echo** each ``heartbeat_interval`` s on ``coaty/3/<ns>.echo/CHN:org.fleetsharing.Echo/<own
+  sourceId>``, which only its sender subscribes to (that exact topic; its own namespace, so that a
+  wildcard subscription of the fleet's namespace does not catch it): a minimal CoatyObject with a
+  sequence number.
   Peers never receive it, so it costs each robot only its own ~150 bytes per interval;
 - a **peer heartbeat** on ``CHN:org.fleetsharing.Heartbeat/<sourceId>``, which every bridge
   observes, each ``peer_interval`` s: by default ``AUTO_SECONDS_PER_PEER`` s per peer known
@@ -61,6 +63,11 @@ MAX_MISSES_SENT = 200
 MAX_LIST = 1000
 # peers tracked at most (names from unauthenticated senders must not grow memory without bound)
 MAX_PEERS = 10000
+
+
+def echo_namespace(namespace):
+    """The Coaty namespace of the echoes of a fleet in ``namespace``: nobody observes it."""
+    return namespace + ".echo"
 
 
 def _compact(obj):
