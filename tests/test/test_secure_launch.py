@@ -182,7 +182,9 @@ def test_running_fleet_launch_refuses_anonymous_forged_sources_and_client_id_tak
         assert watcher.accepted
 
         def heartbeats(robot):
-            return [t for t in list(watcher.received) if t.startswith("coaty/3/%s/CHN:" % NS) and t.endswith(ids[robot])]
+            # its 1 s echoes (namespace <NS>.echo, which the ACL must let it write) and its peer heartbeats
+            return [t for t in list(watcher.received) if t.startswith(("coaty/3/%s/CHN:" % NS, "coaty/3/%s.echo/CHN:" % NS))
+                    and t.endswith(ids[robot])]
         for robot in ids:
             wait_until(lambda r=robot: heartbeats(r), robot + "'s heartbeats (its bridge logged in)", timeout=60)
         # (b) a compromised robot_1 (its own login) and the monitor login publish under robot_0's sourceId

@@ -24,9 +24,11 @@ from dataclasses import dataclass, field
 import paho.mqtt.client as mqtt
 
 from coaty_bridge import areas, codec, footprint as footprints, lifetimes
-from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError,
-                                 WrongTypeError)
-from coaty_bridge.liveness import CHANNEL as HEARTBEAT_CHANNEL, OBJECT_TYPE as HEARTBEAT_OBJECT_TYPE, Liveness
+from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, OutOfRangeError,
+                                 UnknownRobotError, WrongTypeError)
+from coaty_bridge import liveness as liveness_rules
+from coaty_bridge.liveness import (CHANNEL as HEARTBEAT_CHANNEL, ECHO_CHANNEL, OBJECT_TYPE as HEARTBEAT_OBJECT_TYPE,
+                                   Liveness)
 from coaty_bridge.fairness import FairQueue
 from coaty_bridge.identity import identity_for
 from coaty_bridge.security import is_loopback
@@ -98,10 +100,13 @@ class BridgeConfig:
     source_message_rate: float = 100.0
     source_message_burst: int = 1000
     source_queue_size: int = 1000
-    # s: end-to-end liveness (liveness.py): a heartbeat this often, and WARN/ERROR when our own
-    # heartbeat is not echoed or a peer's not heard for liveness_timeout s (issue 27, attack 6)
+    # s: end-to-end liveness (liveness.py): an echo (only we receive it) this often, ERROR when it is
+    # not echoed for liveness_timeout s (issue 27, attack 6); a heartbeat every peer receives each
+    # peer_heartbeat_interval s (0: automatic, 3 s per peer known, at least heartbeat_interval;
+    # issue 29), WARN when a peer's is missing for 3 of its intervals (at least liveness_timeout)
     heartbeat_interval: float = 1.0
     liveness_timeout: float = 3.0
+    peer_heartbeat_interval: float = 0.0
     authenticate_sources: bool = False
     # true: plain mqtt:// to a broker that is not on this machine is allowed (logins and obstacles
     # then cross the network in clear text); false refuses it at start-up (issue 27, item 9)
@@ -204,6 +209,12 @@ class BridgeConfig:
                 fail(name, "must be a positive number of seconds")
         if self.liveness_timeout < 2 * self.heartbeat_interval:
             fail("liveness_timeout", "must be at least twice heartbeat_interval (%g s)" % self.heartbeat_interval)
+        peer = self.peer_heartbeat_interval
+        if isinstance(peer, bool) or not isinstance(peer, (int, float)) or not (
+                peer == 0 or self.heartbeat_interval <= peer <= liveness_rules.MAX_ANNOUNCED_INTERVAL):
+            fail("peer_heartbeat_interval", "must be 0 (automatic: %g s per peer) or %g..%g s (heartbeat_interval.."
+                 "3600)" % (liveness_rules.AUTO_SECONDS_PER_PEER, self.heartbeat_interval,
+                            liveness_rules.MAX_ANNOUNCED_INTERVAL))
         if self.reconnect_max_delay < self.reconnect_min_delay:
             fail("reconnect_max_delay", "smaller than reconnect_min_delay")
         for name in ("footprint_area_size", "obstacle_area_size"):
@@ -360,9 +371,14 @@ class CoatyBridgeClient:
         self._watch_thread = None
         # heartbeats=False: the owner calls heartbeat() itself (tests, with an injected clock)
         self._auto_heartbeats = heartbeats
-        self.liveness = Liveness(config.robot_name, clock, config.liveness_timeout, config.known_robots)
+        self.liveness = Liveness(config.robot_name, clock, config.liveness_timeout, config.known_robots,
+                                 config.heartbeat_interval, config.peer_heartbeat_interval)
         ns = config.namespace
         self._heartbeat_topic = str(Topic(ns, "CHN", self.identity_id, filter=HEARTBEAT_CHANNEL))
+        # the echo goes to a topic only we subscribe to (exactly, no wildcard), in a namespace of its own
+        # so that no subscription of the fleet's namespace (coaty/+/<ns>/+/+ included) catches it
+        self._echo_namespace = liveness_rules.echo_namespace(ns)
+        self._echo_topic = str(Topic(self._echo_namespace, "CHN", self.identity_id, filter=ECHO_CHANNEL))
         self._identity = codec.identity_object(self.identity_id, config.robot_name)
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
         self._footprint_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.footprint_object_type))
@@ -374,6 +390,7 @@ class CoatyBridgeClient:
             (subscription(ns, "RSV", two_way=True), qos),
             (subscription(ns, "CHN:" + HEARTBEAT_CHANNEL), qos),
             (subscription(ns, "DAD"), qos),
+            (self._echo_topic, qos),
         ]
         # Footprint and obstacle areas heard now (the 3 x 3 around the own robot, each at its own size);
         # none until the robot's position is known.
@@ -429,35 +446,70 @@ class CoatyBridgeClient:
                 LOG.error("%s: heartbeat failed: %s: %s", self.config.robot_name, type(err).__name__, err)
 
     def heartbeat(self, leaving=False):
-        """Publishes one heartbeat (a Channel event only bridges observe); see liveness.py.
-        ``leaving``: the last one of a clean stop, so that peers do not miss this robot."""
+        """Publishes one heartbeat, see liveness.py: the echo (a Channel event on a topic only we
+        subscribe to) or, when due, the peer heartbeat every bridge observes (it is echoed too).
+        ``leaving``: a last peer heartbeat of a clean stop, so that peers do not miss this robot."""
         if not self._connected:
             return None
-        seq, hears = self.liveness.next_heartbeat()
-        obj = {"objectType": HEARTBEAT_OBJECT_TYPE, "coreType": "CoatyObject", "objectId": self.identity_id,
-               "name": "Heartbeat %s" % self.config.robot_name, "robot": self.config.robot_name,
-               "seq": seq, "hears": hears}
+        seq, peer = self.liveness.next_heartbeat(peer=True if leaving else None)
+        if peer is None:
+            self._send(self._echo_topic, liveness_rules.echo_payload(self.identity_id, seq), queue=False)
+            self._count("echoes_sent")
+            return None
+        payload = liveness_rules.heartbeat_payload(self.identity_id, self.config.robot_name, seq, peer, leaving)
         if leaving:
-            obj["leaving"] = True
-            return self._mqtt.publish(self._heartbeat_topic, json.dumps({"object": obj}).encode(), qos=1)
-        self._send(self._heartbeat_topic, json.dumps({"object": obj}, separators=(",", ":")).encode(),
-                   queue=False)
-        self._count("heartbeats_sent")
+            return self._mqtt.publish(self._heartbeat_topic, payload, qos=1)
+        self._send(self._heartbeat_topic, payload, queue=False)
+        self._count("peer_heartbeats_sent")
+        return None
+
+    def _on_echo(self, topic, payload):
+        if topic.source_id != self.identity_id:
+            self._count("ignored")   # somebody else's echo: we subscribe to our own only
+            return
+        data = codec.parse_payload(payload, self.config.limits)
+        obj = data.get("object") if isinstance(data, dict) else None
+        if not isinstance(obj, dict) or obj.get("objectType") != liveness_rules.ECHO_OBJECT_TYPE:
+            raise WrongTypeError("echo without a %s object" % liveness_rules.ECHO_OBJECT_TYPE)
+        seq = obj.get("seq")
+        if isinstance(seq, bool) or not isinstance(seq, int):
+            raise WrongTypeError("echo seq %r: wrong type" % (seq,))
+        self.liveness.own_echo(seq)
 
     def _on_heartbeat(self, topic, payload):
         data = codec.parse_payload(payload, self.config.limits)
         obj = data.get("object") if isinstance(data, dict) else None
         if not isinstance(obj, dict) or obj.get("objectType") != HEARTBEAT_OBJECT_TYPE:
             raise WrongTypeError("heartbeat without a %s object" % HEARTBEAT_OBJECT_TYPE)
-        robot, seq, hears = obj.get("robot"), obj.get("seq"), obj.get("hears")
-        if not isinstance(robot, str) or isinstance(seq, bool) or not isinstance(seq, int) \
-                or not isinstance(hears, list) or not all(isinstance(h, str) for h in hears) or len(hears) > 10000:
-            raise WrongTypeError("heartbeat fields robot %r, seq %r, hears: wrong types" % (str(robot)[:40], seq))
+        robot, seq = obj.get("robot"), obj.get("seq")
+        if not isinstance(robot, str) or isinstance(seq, bool) or not isinstance(seq, int):
+            raise WrongTypeError("heartbeat fields robot %r, seq %r: wrong types" % (str(robot)[:40], seq))
+        legacy = "interval" not in obj and "hears" in obj   # a sender of the first design (issue 27)
+        if legacy:
+            names, interval, heard = obj.get("hears"), liveness_rules.LEGACY_INTERVAL, None
+        else:
+            names, interval, heard = obj.get("misses", []), obj.get("interval"), obj.get("heard")
+            if isinstance(interval, bool) or not isinstance(interval, (int, float)) \
+                    or isinstance(heard, bool) or not isinstance(heard, int):
+                raise WrongTypeError("heartbeat of %r: interval %r, heard %r: wrong types"
+                                     % (str(robot)[:40], str(interval)[:20], str(heard)[:20]))
+            if not liveness_rules.MIN_ANNOUNCED_INTERVAL <= interval <= liveness_rules.MAX_ANNOUNCED_INTERVAL \
+                    or not 0 <= heard <= 10 ** 6:
+                raise OutOfRangeError("heartbeat of %r: interval %r s not in %g..%g or heard %r not in 0..1000000"
+                                      % (str(robot)[:40], interval, liveness_rules.MIN_ANNOUNCED_INTERVAL,
+                                         liveness_rules.MAX_ANNOUNCED_INTERVAL, heard))
+        if not isinstance(names, list) or not all(isinstance(h, str) for h in names):
+            raise WrongTypeError("heartbeat of %r: %s must be a list of robot names"
+                                 % (str(robot)[:40], "hears" if legacy else "misses"))
+        if len(names) > liveness_rules.MAX_LIST:
+            raise OutOfRangeError("heartbeat of %r: %s lists %d robots, more than %d"
+                                  % (str(robot)[:40], "hears" if legacy else "misses", len(names),
+                                     liveness_rules.MAX_LIST))
         check_name(robot, "heartbeat robot")
         if len(self._robot_of) < 4096 or topic.source_id in self._robot_of:
             self._robot_of[topic.source_id] = robot
         if topic.source_id == self.identity_id:
-            self.liveness.own_echo(seq)
+            self.liveness.own_echo(seq)   # our own peer heartbeat is an echo too
             return
         if self.config.authenticate_sources and topic.source_id != identity_for(self.config.namespace, robot):
             raise ForgedSourceError("heartbeat of %r was sent by %s" % (robot, topic.source_id))
@@ -469,7 +521,11 @@ class CoatyBridgeClient:
             # the broker sends the same one as the last will of a robot it lost.)
             self.liveness.forget(robot)
             return
-        self.liveness.peer(robot, hears)
+        if legacy:
+            self.liveness.peer(robot, interval, hears=names)
+            self._count("heartbeats_received_legacy")
+        else:
+            self.liveness.peer(robot, interval, misses=names, heard=heard)
         self._count("heartbeats_received")
 
     def _watch_broker(self):
@@ -946,6 +1002,9 @@ class CoatyBridgeClient:
             if topic.event == "CHN" and topic.filter == HEARTBEAT_CHANNEL \
                     and topic.namespace == self.config.namespace:
                 self._on_heartbeat(topic, payload)   # our own included: the echo is the point
+                return
+            if topic.event == "CHN" and topic.filter == ECHO_CHANNEL and topic.namespace == self._echo_namespace:
+                self._on_echo(topic, payload)
                 return
             if topic.source_id == self.identity_id:
                 self._count("echoes_suppressed")

@@ -2,31 +2,111 @@
 MQTT session that paho calls connected say nothing about whether messages flow. A silent 30 s
 stall (robot_2 missed 72 of 89 deliveries) was reported "connected" throughout.
 
-Every bridge publishes a small heartbeat each ``heartbeat_interval`` s: a Coaty Channel event on
-channel ``<namespace-wide heartbeat channel>`` (``CHN:org.fleetsharing.Heartbeat``), which Coaty
-agents that do not observe that channel never see. It carries the robot's name, a sequence
-number and the robots whose heartbeats it currently hears. The broker sends it back to its sender
-too (we subscribe to the channel), so each bridge checks:
+Two kinds of Coaty Channel events, which Coaty agents that do not observe these channels never see
+(issue 29: the first design, a 1 s heartbeat from every robot to every robot listing all robots
+heard, cost each robot 2.75 MB per minute at 100 robots):
 
-- **own echo**: its own latest heartbeat came back within ``liveness_timeout`` s of being sent;
-  otherwise the path to or from the broker is stalled (ERROR);
+- an **echo** each ``heartbeat_interval`` s on ``coaty/3/<ns>.echo/CHN:org.fleetsharing.Echo/<own
+  sourceId>``, which only its sender subscribes to (that exact topic; its own namespace, so that a
+  wildcard subscription of the fleet's namespace does not catch it): a minimal CoatyObject with a
+  sequence number.
+  Peers never receive it, so it costs each robot only its own ~150 bytes per interval;
+- a **peer heartbeat** on ``CHN:org.fleetsharing.Heartbeat/<sourceId>``, which every bridge
+  observes, each ``peer_interval`` s: by default ``AUTO_SECONDS_PER_PEER`` s per peer known
+  (floor: ``heartbeat_interval``), so what each robot receives of them stays about the same however
+  large the fleet. It carries its sender's ``interval`` (the longest it waits until its next one),
+  ``heard`` (how many peers it hears) and ``misses`` (the robots it expects, i.e. heard before or
+  in known_robots, but has not heard for their timeout). A peer heartbeat counts as an echo too.
+
+Each bridge checks:
+
+- **own echo**: its newest echo or peer heartbeat came back within ``liveness_timeout`` s of being
+  sent; otherwise the path to or from the broker is stalled (ERROR);
 - **peers**: every peer heard before (or named in ``known_robots``) was heard within
-  ``liveness_timeout`` s; otherwise it is partitioned from us or down without a Deadvertise (WARN);
-- **deaf peers**: a peer whose heartbeats arrive but do not list us does not receive (WARN).
+  ``peer_timeout(its announced interval)`` = max(liveness_timeout, PEER_TIMEOUT_INTERVALS x
+  interval); otherwise it is partitioned from us or down without a leaving heartbeat (WARN). A
+  robot in known_robots never heard is missed after that time for our own interval;
+- **deaf peers**: a peer whose heartbeats arrive but whose ``misses`` name us does not receive us
+  (WARN). Older heartbeats (``hears``: every robot heard, no ``interval``) are still accepted: their
+  sender is judged by LEGACY_INTERVAL and is deaf when ``hears`` lacks us.
 
 Pure Python, no paho; the clock is injected (tests advance it, nothing sleeps).
 """
+import json
+import random
 import threading
 
 OK, WARN, ERROR = 0, 1, 2
 CHANNEL = "org.fleetsharing.Heartbeat"
 OBJECT_TYPE = "org.fleetsharing.Heartbeat"
+ECHO_CHANNEL = "org.fleetsharing.Echo"
+ECHO_OBJECT_TYPE = "org.fleetsharing.Echo"
+
+# automatic peer heartbeat interval (peer_heartbeat_interval 0): this many s per peer known. Each
+# robot then receives about one peer heartbeat per 0.9 x AUTO_SECONDS_PER_PEER s (~220 bytes each:
+# ~4.9 kB/min) at any fleet size; with the 1 s echo (~8.6 kB/min) below the 15 kB/min budget.
+AUTO_SECONDS_PER_PEER = 3.0
+# the next peer heartbeat goes out after a random JITTER..1 of the interval (which is announced as
+# the longest wait): robots that started or reconnected together do not stay in step
+JITTER = 0.8
+# a peer is missed when silent for this many of its announced intervals (two lost in a row are not
+# a partition), and never sooner than liveness_timeout
+PEER_TIMEOUT_INTERVALS = 3
+# senders of the first design did not announce an interval: they beat each 1 s (the default)
+LEGACY_INTERVAL = 1.0
+# an announced interval outside this range is refused (out_of_range)
+MIN_ANNOUNCED_INTERVAL, MAX_ANNOUNCED_INTERVAL = 0.01, 3600.0
+MAX_AUTO_INTERVAL = 3600.0
+# names sent in misses at most (a big partition: the rest is not named); a received list longer than
+# MAX_LIST is refused
+MAX_MISSES_SENT = 200
+MAX_LIST = 1000
+# peers tracked at most (names from unauthenticated senders must not grow memory without bound)
+MAX_PEERS = 10000
+
+
+def echo_namespace(namespace):
+    """The Coaty namespace of the echoes of a fleet in ``namespace``: nobody observes it."""
+    return namespace + ".echo"
+
+
+def _compact(obj):
+    return json.dumps({"object": obj}, separators=(",", ":"), allow_nan=False).encode()
+
+
+def echo_payload(identity_id, seq):
+    """The echo: a minimal CoatyObject (its name is empty: nobody but its sender reads it)."""
+    return _compact({"objectType": ECHO_OBJECT_TYPE, "coreType": "CoatyObject", "objectId": identity_id,
+                     "name": "", "seq": seq})
+
+
+def heartbeat_payload(identity_id, robot, seq, peer, leaving=False):
+    """A peer heartbeat; ``peer`` is the dict of Liveness.next_heartbeat (interval, heard, misses)."""
+    obj = {"objectType": OBJECT_TYPE, "coreType": "CoatyObject", "objectId": identity_id, "name": robot,
+           "robot": robot, "seq": seq, "interval": peer["interval"], "heard": peer["heard"]}
+    if peer["misses"]:
+        obj["misses"] = peer["misses"]
+    if leaving:
+        obj["leaving"] = True
+    return _compact(obj)
+
+
+def peer_timeout(interval, timeout):
+    return max(float(timeout), PEER_TIMEOUT_INTERVALS * interval)
+
+
+def _round_interval(value):
+    # announced as a short number: 247.5, not 247.49999999
+    return round(value, 2) if value < 10 else round(value, 1)
 
 
 class Liveness:
-    def __init__(self, robot, clock, timeout=3.0, known_robots=()):
+    def __init__(self, robot, clock, timeout=3.0, known_robots=(), heartbeat_interval=1.0, peer_interval=0.0,
+                 rng=None):
         self.robot = robot
         self.timeout = float(timeout)
+        self.heartbeat_interval = float(heartbeat_interval)
+        self.fixed_peer_interval = float(peer_interval)   # 0: automatic
         self._clock = clock
         self._lock = threading.Lock()
         self._started = clock()
@@ -35,13 +115,31 @@ class Liveness:
         self._last_sent = None
         self._last_echo = None     # time the newest echo arrived
         self._echoed_seq = 0
-        self._peers = {}           # robot -> (time heard, robots it hears)
+        self._rng = rng or random.Random()
+        self._next_peer = None     # time the next peer heartbeat is due (None: now)
+        self._interval = None      # the interval announced in the last one
+        # robot -> (time heard, announced interval, misses us, heard count)
+        self._peers = {}
         self._expected = set(r for r in known_robots if r != robot)
 
-    # ----------------------------------------------------------- events
+    # ----------------------------------------------------------- sending
 
-    def next_heartbeat(self):
-        """Sequence number and the robots heard now, for the heartbeat about to be sent."""
+    def peer_interval(self):
+        """s until our next peer heartbeat: fixed, or AUTO_SECONDS_PER_PEER per peer known."""
+        with self._lock:
+            return self._peer_interval_locked()
+
+    def _peer_interval_locked(self):
+        if self.fixed_peer_interval > 0:
+            return self.fixed_peer_interval
+        known = len(set(self._peers) | self._expected)
+        return _round_interval(min(MAX_AUTO_INTERVAL, max(self.heartbeat_interval, AUTO_SECONDS_PER_PEER * known)))
+
+    def next_heartbeat(self, peer=None):
+        """(seq, fields): the sequence number of the heartbeat about to be sent and, when a peer
+        heartbeat is due (or ``peer`` is True), its fields {interval, heard, misses}; None: an echo
+        only. A peer heartbeat is due from half an echo interval before its time on (the sender
+        wakes once per heartbeat_interval)."""
         now = self._clock()
         with self._lock:
             self._seq += 1
@@ -49,8 +147,27 @@ class Liveness:
             for old in [s for s in self._sent if s < self._seq - 64]:
                 del self._sent[old]
             self._last_sent = now
-            hears = sorted(r for r, (t, _h) in self._peers.items() if now - t <= self.timeout)
-            return self._seq, hears
+            if peer is None:
+                peer = self._next_peer is None or now >= self._next_peer - 0.5 * self.heartbeat_interval
+            if not peer:
+                return self._seq, None
+            self._interval = self._peer_interval_locked()
+            self._next_peer = now + self._interval * self._rng.uniform(JITTER, 1.0)
+            heard = 0
+            misses = []
+            for robot in sorted(set(self._peers) | self._expected):
+                entry = self._peers.get(robot)
+                if entry is not None and now - entry[0] <= peer_timeout(entry[1], self.timeout):
+                    heard += 1
+                elif entry is not None or now - self._started > self._never_heard_after():
+                    misses.append(robot)
+            return self._seq, {"interval": self._interval, "heard": heard, "misses": misses[:MAX_MISSES_SENT]}
+
+    def _never_heard_after(self):
+        # a robot in known_robots we never heard: judged as if it beat at our own interval
+        return peer_timeout(self._interval or self._peer_interval_locked(), self.timeout)
+
+    # ----------------------------------------------------------- receiving
 
     def own_echo(self, seq):
         now = self._clock()
@@ -59,23 +176,30 @@ class Liveness:
                 self._echoed_seq = seq
                 self._last_echo = now
 
-    def peer(self, robot, hears):
+    def peer(self, robot, interval=LEGACY_INTERVAL, misses=(), heard=None, hears=None):
+        """A peer's heartbeat: its announced interval and misses, or (a sender of the first design)
+        ``hears``, the robots it heard."""
         if robot == self.robot:
             return
+        misses_us = self.robot not in hears if hears is not None else self.robot in misses
         with self._lock:
-            self._peers[robot] = (self._clock(), frozenset(hears))
+            if robot not in self._peers and len(self._peers) >= MAX_PEERS:
+                return
+            self._peers[robot] = (self._clock(), float(interval), misses_us, heard)
 
     def forget(self, robot):
-        """A peer that said goodbye (Deadvertise) is not missed."""
+        """A peer that said goodbye (leaving heartbeat) is not missed."""
         with self._lock:
             self._peers.pop(robot, None)
             self._expected.discard(robot)
 
     def reset(self):
-        """After a reconnect: the echo is judged from the next heartbeat on."""
+        """After a reconnect: the echo is judged from the next heartbeat on, and the next heartbeat
+        is a peer heartbeat (peers that missed us hear us again at once)."""
         with self._lock:
             self._started = self._clock()
             self._last_echo = None
+            self._next_peer = None
 
     # ----------------------------------------------------------- verdict
 
@@ -99,16 +223,16 @@ class Liveness:
             for robot in sorted(set(self._peers) | self._expected):
                 heard = self._peers.get(robot)
                 if heard is None:
-                    if now - self._started > self.timeout:
+                    if now - self._started > self._never_heard_after():
                         missing.append("%s never heard" % robot)
-                elif now - heard[0] > self.timeout:
-                    missing.append("%s silent for %.1f s" % (robot, now - heard[0]))
+                elif now - heard[0] > peer_timeout(heard[1], self.timeout):
+                    missing.append("%s silent for %.1f s (beats every %g s)" % (robot, now - heard[0], heard[1]))
             if missing:
                 level = max(level, WARN)
                 problems.append("partition: no heartbeat from " + ", ".join(missing))
-            deaf = sorted(r for r, (t, hears) in self._peers.items()
-                          if now - t <= self.timeout and self._last_echo is not None
-                          and now - self._started > self.timeout and self.robot not in hears)
+            echo_ok = self._last_echo is not None and now - self._started > self.timeout and level != ERROR
+            deaf = sorted(r for r, (t, interval, misses_us, _n) in self._peers.items()
+                          if echo_ok and misses_us and now - t <= peer_timeout(interval, self.timeout))
             if deaf:
                 level = max(level, WARN)
                 problems.append("deaf receiver: %s does not hear us" % ", ".join(deaf))
@@ -118,7 +242,9 @@ class Liveness:
         now = self._clock()
         with self._lock:
             out = {"heartbeats_sent": self._seq, "heartbeats_echoed": self._echoed_seq,
-                   "peers_heard": sum(1 for t, _h in self._peers.values() if now - t <= self.timeout)}
+                   "peers_heard": sum(1 for t, interval, _m, _n in self._peers.values()
+                                      if now - t <= peer_timeout(interval, self.timeout)),
+                   "peer_heartbeat_interval": self._interval or self._peer_interval_locked()}
             if self._last_echo is not None:
                 out["own_echo_age"] = round(now - self._last_echo, 3)
             return out

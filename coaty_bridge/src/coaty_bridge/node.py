@@ -37,7 +37,7 @@ _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "i
            "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "authenticate_sources", "footprint_area_size",
            "obstacle_area_size",
            "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
-           "liveness_timeout", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")
+           "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")
 
 
 def msg_to_update(msg):
