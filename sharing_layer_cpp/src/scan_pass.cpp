@@ -61,8 +61,7 @@ void ScanPass::prepareWatch(const Observation& observation, double now_s, double
   watch_.loose_cells.clear();
   watch_.free_margin = parts.params.clearing_margin;
   watch_.free_neighbours = parts.params.clearing_neighbours;
-  watch_.scratch = parts.flags.data();
-  watch_.scratch_size = parts.flags.size();
+  watch_.scratch = &parts.flags;
   // The present cells stay flagged between scans (refreshed when they change); the boxes of those in view are the
   // watch's regions.
   parts.fleet.refreshWatchFlags(g, parts.flags);
@@ -192,7 +191,6 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
   // Growth candidates, computed once per scan. They lie within obstacle_range of the robot, most obstacles in view
   // far beyond: their box rules those out without looking at their rings.
   parts.observed.steadyShareable(parts.params.clearing_scans, parts.params.clearing_time, parts.flags, steady_);
-  steady_all_.assign(steady_.begin(), steady_.end());  // to reset their flags
   CellRect steady_box{ std::numeric_limits<int>::max(), std::numeric_limits<int>::max(),
                        std::numeric_limits<int>::min(), std::numeric_limits<int>::min() };
   for (std::uint32_t index : steady_)
@@ -203,10 +201,6 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
   }
   ScanEvidence evidence{ marked_watched_, occupied_, touch.watched_free, steady_, steady_box };
   parts.fleet.monitor(in_view_, evidence, now_s, parts.params, rules, g, parts.observed, parts.flags, updates);
-  for (std::uint32_t index : steady_all_)
-  {
-    parts.flags.clear(index, CellFlags::kSteady);
-  }
 }
 
 }  // namespace sharing_layer

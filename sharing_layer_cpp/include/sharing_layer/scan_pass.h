@@ -89,8 +89,7 @@ private:
   LastScan last_;
   std::vector<SharedObstacle*> in_view_;
   ScanWatch watch_;
-  std::vector<std::uint32_t> not_lethal_before_, grazed_, marked_known_, signs_, occupied_, marked_watched_, steady_,
-      steady_all_;
+  std::vector<std::uint32_t> not_lethal_before_, grazed_, marked_known_, signs_, occupied_, marked_watched_, steady_;
 };
 
 }  // namespace sharing_layer
