@@ -251,6 +251,11 @@ void ScanRun::validateWatch() const
       }
     }
   }
+  if (!watch_.point_cells.empty() && watch_.point_cells.size() != observation_.points.size())
+  {
+    throw std::invalid_argument("applyScan: point_cells holds " + std::to_string(watch_.point_cells.size()) +
+                                " cells for " + std::to_string(observation_.points.size()) + " points");
+  }
   if (watch_.free_neighbours > 10000)
   {
     throw std::invalid_argument("applyScan: free_neighbours must be <= 10000, got " +
@@ -318,7 +323,17 @@ void ScanRun::clearPass()
       clipped = true;
     }
     unsigned int x1 = 0, y1 = 0;
-    if (!g_.worldToMap(wx, wy, x1, y1))
+    if (!clipped && !watch_.point_cells.empty())  // looked up by the caller
+    {
+      const ScanWatch::Cell cell = watch_.point_cells[pi];
+      if (cell.x == ScanWatch::kNoCell)
+      {
+        continue;
+      }
+      x1 = cell.x;
+      y1 = cell.y;
+    }
+    else if (!g_.worldToMap(wx, wy, x1, y1))
     {
       continue;
     }
@@ -391,8 +406,10 @@ void ScanRun::markPass()
   const double sq_obstacle_range = limits_.obstacle_range * limits_.obstacle_range;
   const double ox = ox_, oy = oy_, oz = observation_.origin.z;
   const double sq_hit_range = watching_ && !clearing_ ? hitRangeSquared() : -1.0;
-  for (const Point3& p : observation_.points)
+  const bool have_cells = !watch_.point_cells.empty();
+  for (std::size_t pi = 0; pi < observation_.points.size(); ++pi)
   {
+    const Point3& p = observation_.points[pi];
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < limits_.min_obstacle_height ||
         p.z > limits_.max_obstacle_height)
     {
@@ -406,11 +423,22 @@ void ScanRun::markPass()
       continue;
     }
     unsigned int mx = 0, my = 0;
-    if (!g_.worldToMap(p.x, p.y, mx, my))
+    std::uint32_t index = 0;
+    if (have_cells)
+    {
+      const ScanWatch::Cell cell = watch_.point_cells[pi];
+      if (cell.x == ScanWatch::kNoCell)
+      {
+        continue;
+      }
+      mx = cell.x;
+      my = cell.y;
+    }
+    else if (!g_.worldToMap(p.x, p.y, mx, my))
     {
       continue;
     }
-    const std::uint32_t index = g_.getIndex(mx, my);
+    index = g_.getIndex(mx, my);
     const std::uint8_t f = watching_ ? flags_->get(index) : 0;
     if ((f & kWatched) && !(f & kHit) && ((f & kListed) || inRegion(watch_.regions, mx, my)))
     {

@@ -286,3 +286,52 @@ TEST(ScanWatch, AClippedEndpointIsNoHit)
     EXPECT_EQ(std::vector<std::uint32_t>{ edge }, touch.watched_free) << "flagged " << flagged;
   }
 }
+
+TEST(ScanWatch, PointCellsGivenByTheCallerChangeNothing)
+{
+  // ScanPass looks each point's cell up once and hands them to applyScan (ScanWatch::point_cells): grids, marks,
+  // bounds and evidence must be exactly those of a scan that looks them up itself, with points off the grid (clipped
+  // beams), not finite and outside the height limits among them. A list of another length is refused.
+  std::mt19937 rng(29);
+  const GridGeometry g(0.05, -1.0, 2.0, 80, 60);
+  std::uniform_real_distribution<double> ux(g.origin_x - 1.0, g.endX() + 1.0), uy(g.origin_y - 1.0, g.endY() + 1.0);
+  for (int trial = 0; trial < 300; ++trial)
+  {
+    Observation obs;
+    obs.origin = Point3{ g.origin_x + 2.0, g.origin_y + 1.5, 0.3 };
+    for (int i = 0; i < 200; ++i)
+    {
+      const double z = rng() % 10 == 0 ? 5.0 : 0.3;
+      obs.points.push_back(rng() % 50 == 0 ? Point3{ NAN, 1.0, 0.3 } : Point3{ ux(rng), uy(rng), z });
+    }
+    ScanLimits limits;
+    limits.obstacle_range = 0.5 + (rng() % 30) * 0.1;
+    limits.raytrace_range = 0.5 + (rng() % 40) * 0.1;
+    limits.max_obstacle_height = 2.0;
+    ScanWatch watch;
+    watch.regions = { CellRect{ 10, 10, 30, 25 } };
+    watch.cells = ScanWatch::fromRects(g, watch.regions).cells;
+    CostGrid plain(g, NO_INFORMATION), given(g, NO_INFORMATION);
+    const ScanTouch expected = applyScan(plain, obs, limits, watch);
+    for (const Point3& p : obs.points)
+    {
+      ScanWatch::Cell cell{ ScanWatch::kNoCell, 0 };
+      if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && p.z <= limits.max_obstacle_height &&
+          !g.worldToMap(p.x, p.y, cell.x, cell.y))
+      {
+        cell.x = ScanWatch::kNoCell;
+      }
+      watch.point_cells.push_back(cell);
+    }
+    const ScanTouch touch = applyScan(given, obs, limits, watch);
+    ASSERT_TRUE(std::equal(plain.data(), plain.data() + g.cellCount(), given.data())) << "trial " << trial;
+    ASSERT_EQ(expected.marked, touch.marked) << "trial " << trial;
+    ASSERT_EQ(expected.watched_cleared, touch.watched_cleared) << "trial " << trial;
+    ASSERT_EQ(expected.watched_free, touch.watched_free) << "trial " << trial;
+    ASSERT_EQ(expected.watched_hit, touch.watched_hit) << "trial " << trial;
+    ASSERT_EQ(expected.min_x, touch.min_x);
+    ASSERT_EQ(expected.max_y, touch.max_y);
+    watch.point_cells.pop_back();
+    EXPECT_THROW(applyScan(given, obs, limits, watch), std::invalid_argument);
+  }
+}

@@ -42,6 +42,15 @@ struct ScanWatch
   /// (CellFlags::kScanBits) must be clear.
   CellFlags* scratch = nullptr;
   static constexpr std::uint8_t kFlaggedWatched = CellFlags::kFlaggedWatched;
+  /// Optional: the cell of each observation point, as GridGeometry::worldToMap gives it (x kNoCell where it fails or
+  /// where the point is not used), for a caller that looked them up already: the scan does not look them up again.
+  /// Empty, or one per point.
+  struct Cell
+  {
+    unsigned int x, y;
+  };
+  std::vector<Cell> point_cells;
+  static constexpr unsigned int kNoCell = 0xFFFFFFFFu;
   static constexpr std::uint8_t kOwnerBits = CellFlags::kOwnerBits;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
