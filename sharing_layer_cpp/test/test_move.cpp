@@ -460,7 +460,8 @@ TEST(OneGrid, SharingAddsAtMostOneBytePerCellOnTheReferenceWarehouse)
     const double cx = 30.0 + 4.0 * k, cy = 45.0;
     FleetRobot robot;
     robot.name = "robot_" + std::to_string(k + 1);
-    robot.footprint = { { cx - 0.3, cy - 0.3 }, { cx + 0.3, cy - 0.3 }, { cx + 0.3, cy + 0.3 }, { cx - 0.3, cy + 0.3 } };
+    robot.footprint = { { cx - 0.3, cy - 0.3 }, { cx + 0.3, cy - 0.3 }, { cx + 0.3, cy + 0.3 },
+                        { cx - 0.3, cy + 0.3 } };
     core.fleetRobots().update(robot);
   }
   for (int i = 0; i < bench::kCrates; ++i)

@@ -224,7 +224,8 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
     }
     else
     {
-      ASSERT_EQ(flagged_before, bytesOf(scratch)) << "trial " << trial << ": the flagged cells must come back as they were";
+      ASSERT_EQ(flagged_before, bytesOf(scratch))
+          << "trial " << trial << ": the flagged cells must come back as they were";
       ++flagged_trials;
     }
     results += expected.cleared.size() + expected.free.size() + expected.hit.size();

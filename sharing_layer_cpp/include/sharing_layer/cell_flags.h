@@ -28,7 +28,8 @@ public:
   static constexpr std::uint8_t kScanBits = 0x1E;  ///< applyScan's (see scan_update.cpp)
   static constexpr std::uint8_t kRemembered = 0x40;
   static constexpr std::uint8_t kShareable = 0x20;
-  static constexpr std::uint8_t kOwnerBits = 0xE0;  ///< applyScan leaves these alone (kRemembered, kShareable and one spare)
+  /// applyScan leaves these alone (kRemembered, kShareable and one spare)
+  static constexpr std::uint8_t kOwnerBits = 0xE0;
   static constexpr std::size_t kTileCells = 128;
 
   /// @brief cell_count cells, no bit set.
@@ -48,7 +49,10 @@ public:
     size_ = 0;
   }
   /// @return the cell's byte (0 in a tile not in use)
-  std::uint8_t get(std::uint32_t index) const { return pool_[dir_[index / kTileCells] * kTileCells + index % kTileCells]; }
+  std::uint8_t get(std::uint32_t index) const
+  {
+    return pool_[dir_[index / kTileCells] * kTileCells + index % kTileCells];
+  }
   bool has(std::uint32_t index, std::uint8_t bit) const { return (get(index) & bit) != 0; }
   void set(std::uint32_t index, std::uint8_t bits)
   {
