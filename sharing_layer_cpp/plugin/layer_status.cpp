@@ -191,6 +191,12 @@ std::size_t SharingLayer::planPoses()
   return core_ ? core_->plan().size() : 0;
 }
 
+std::size_t SharingLayer::perCellBytes()
+{
+  std::lock_guard<std::mutex> lock(core_mutex_);
+  return (core_ ? core_->perCellBytes() : 0) + (map_ ? map_->unknown.bytes() : 0);
+}
+
 void SharingLayer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
 {
   using diagnostic_msgs::DiagnosticStatus;

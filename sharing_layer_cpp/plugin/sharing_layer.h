@@ -78,6 +78,9 @@ public:
   bool mapReceived();
   /// @brief Poses of the plan the plan trigger follows (0: none).
   std::size_t planPoses();
+  /// @brief Bytes the layer keeps per grid cell besides ObstacleLayer's grid, summed over the grid: the core's
+  /// (SharingCore::perCellBytes) and the a-priori map's unknown cells it keeps to hand to a new or moved core.
+  std::size_t perCellBytes();
 
 private:
   void stuckCallback(const std_msgs::Empty::ConstPtr& msg);

@@ -311,23 +311,14 @@ bool FleetObstacles::monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence
   return !marked_.empty() || !cleared_.empty();
 }
 
-bool FleetObstacles::steadyInRing(const CellRect& r, int gap, const GridGeometry& g, const CellFlags& flags)
+bool FleetObstacles::steadyInRing(const CellRect& r, int gap, const GridGeometry& g,
+                                  const std::vector<std::uint32_t>& steady)
 {
-  const int x0 = std::max(0, r.min_x - gap), x1 = std::min(static_cast<int>(g.size_x) - 1, r.max_x + gap);
-  const int y0 = std::max(0, r.min_y - gap), y1 = std::min(static_cast<int>(g.size_y) - 1, r.max_y + gap);
-  for (int y = y0; y <= y1; ++y)
-  {
-    const std::uint8_t* row = flags.data() + static_cast<std::size_t>(y) * g.size_x;
-    auto any = [&](int from, int to) {
-      return std::any_of(row + from, row + to + 1, [](std::uint8_t f) { return (f & CellFlags::kSteady) != 0; });
-    };
-    if (y < r.min_y || y > r.max_y ? any(x0, x1)
-                                   : (x0 <= r.min_x - 1 && any(x0, r.min_x - 1)) || (r.max_x + 1 <= x1 && any(r.max_x + 1, x1)))
-    {
-      return true;
-    }
-  }
-  return false;
+  const CellRect ring{ r.min_x - gap, r.min_y - gap, r.max_x + gap, r.max_y + gap };
+  return std::any_of(steady.begin(), steady.end(), [&](std::uint32_t index) {
+    const int x = static_cast<int>(index % g.size_x), y = static_cast<int>(index / g.size_x);
+    return ring.contains(x, y) && !r.contains(x, y);
+  });
 }
 
 void FleetObstacles::growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& steady,
@@ -336,7 +327,7 @@ void FleetObstacles::growInto(SharedObstacle& obstacle, std::vector<std::uint32_
 {
   // A candidate touching the obstacle lies in the ring of width cluster_gap around its rectangle (cells inside are
   // monitored, never shareable): most obstacles in view have none there.
-  if (steady.empty() || obstacle.cells.presentCount() == 0 || !steadyInRing(obstacle.rectangle_cells, gap, g, flags))
+  if (steady.empty() || obstacle.cells.presentCount() == 0 || !steadyInRing(obstacle.rectangle_cells, gap, g, steady))
   {
     return;
   }

@@ -147,7 +147,7 @@ void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint
   }
 }
 
-void ObservedCells::steadyShareable(unsigned int clearing_scans, double clearing_time, CellFlags& flags,
+void ObservedCells::steadyShareable(unsigned int clearing_scans, double clearing_time, const CellFlags& flags,
                                     std::vector<std::uint32_t>& steady) const
 {
   steady.clear();
@@ -157,7 +157,6 @@ void ObservedCells::steadyShareable(unsigned int clearing_scans, double clearing
     if (cell != nullptr && cell->marks >= clearing_scans && cell->time - cell->marked_since >= clearing_time)
     {
       steady.push_back(index);
-      flags.set(index, CellFlags::kSteady);
     }
   }
 }

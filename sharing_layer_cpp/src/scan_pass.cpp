@@ -61,8 +61,7 @@ void ScanPass::prepareWatch(const Observation& observation, double now_s, double
   watch_.loose_cells.clear();
   watch_.free_margin = parts.params.clearing_margin;
   watch_.free_neighbours = parts.params.clearing_neighbours;
-  watch_.scratch = parts.flags.data();
-  watch_.scratch_size = parts.flags.size();
+  watch_.scratch = &parts.flags;
   // The present cells stay flagged between scans (refreshed when they change); the boxes of those in view are the
   // watch's regions.
   parts.fleet.refreshWatchFlags(g, parts.flags);
@@ -83,23 +82,37 @@ void ScanPass::collectNewMarks(const Observation& observation, const ScanLimits&
   // Cells this scan will mark that are not lethal now: the "newly marked" cells of the plan trigger. Also the
   // endpoints between obstacle_range and raytrace_range: the rest of a face whose middle the plan trigger fires
   // on (see Triggers::checkPlan).
+  // Each usable point's cell is looked up here once, for applyScan too (ScanWatch::point_cells).
   not_lethal_before_.clear();
   last_.far_hits.clear();
+  const GridGeometry& g = parts.grid.geometry();
+  std::vector<ScanWatch::Cell>& cells = watch_.point_cells;
+  cells.resize(observation.points.size());
+  for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
+  {
+    const Point3& p = observation.points[pi];
+    ScanWatch::Cell& cell = cells[pi];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < l.min_obstacle_height ||
+        p.z > l.max_obstacle_height || !g.worldToMap(p.x, p.y, cell.x, cell.y))
+    {
+      cell.x = ScanWatch::kNoCell;
+    }
+  }
   if (!parts.plan_set || !l.marking)  // a source that does not mark makes nothing new
   {
     return;
   }
-  const GridGeometry& g = parts.grid.geometry();
   const double ox = observation.origin.x;
   const double oy = observation.origin.y;
   const double sq_range = l.obstacle_range * l.obstacle_range;
   const double sq_far = l.raytrace_range * l.raytrace_range;
-  for (const Point3& p : observation.points)
+  for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
   {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < l.min_obstacle_height ||
-        p.z > l.max_obstacle_height)
+    const Point3& p = observation.points[pi];
+    const ScanWatch::Cell cell = cells[pi];
+    if (cell.x == ScanWatch::kNoCell)
     {
-      continue;
+      continue;  // unusable, or off the grid
     }
     const double dz = p.z - observation.origin.z;
     const double d_sq = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz;
@@ -107,18 +120,17 @@ void ScanPass::collectNewMarks(const Observation& observation, const ScanLimits&
     {
       continue;  // cleared along, not marked
     }
-    unsigned int mx = 0, my = 0;
     if (d_sq >= sq_range)
     {
-      if (d_sq < sq_far && g.worldToMap(p.x, p.y, mx, my))
+      if (d_sq < sq_far)
       {
-        last_.far_hits.push_back(g.getIndex(mx, my));
+        last_.far_hits.push_back(g.getIndex(cell.x, cell.y));
       }
       continue;
     }
-    if (g.worldToMap(p.x, p.y, mx, my) && parts.grid.getCost(mx, my) != LETHAL_OBSTACLE)
+    if (parts.grid.getCost(cell.x, cell.y) != LETHAL_OBSTACLE)
     {
-      not_lethal_before_.push_back(g.getIndex(mx, my));
+      not_lethal_before_.push_back(g.getIndex(cell.x, cell.y));
     }
   }
 }
@@ -192,7 +204,6 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
   // Growth candidates, computed once per scan. They lie within obstacle_range of the robot, most obstacles in view
   // far beyond: their box rules those out without looking at their rings.
   parts.observed.steadyShareable(parts.params.clearing_scans, parts.params.clearing_time, parts.flags, steady_);
-  steady_all_.assign(steady_.begin(), steady_.end());  // to reset their flags
   CellRect steady_box{ std::numeric_limits<int>::max(), std::numeric_limits<int>::max(),
                        std::numeric_limits<int>::min(), std::numeric_limits<int>::min() };
   for (std::uint32_t index : steady_)
@@ -203,10 +214,6 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
   }
   ScanEvidence evidence{ marked_watched_, occupied_, touch.watched_free, steady_, steady_box };
   parts.fleet.monitor(in_view_, evidence, now_s, parts.params, rules, g, parts.observed, parts.flags, updates);
-  for (std::uint32_t index : steady_all_)
-  {
-    parts.flags.clear(index, CellFlags::kSteady);
-  }
 }
 
 }  // namespace sharing_layer

@@ -59,7 +59,9 @@ constexpr std::uint8_t kVisitedDeep = 2;     ///< a beam passed with its endpoin
 constexpr std::uint8_t kVisitedShallow = 4;  ///< a beam passed with its endpoint closer
 constexpr std::uint8_t kHit = 8;             ///< an endpoint of this scan lies in the cell
 constexpr std::uint8_t kListed = 16;         ///< listed in the watch for this scan
-static_assert(((kFlagged | kVisitedDeep | kVisitedShallow | kHit | kListed) & ScanWatch::kOwnerBits) == 0,
+static_assert((kVisitedDeep | kVisitedShallow | kHit | kListed) == CellFlags::kScanBits,
+              "the scan's bits are CellFlags::kScanBits");
+static_assert(((kFlagged | CellFlags::kScanBits) & ScanWatch::kOwnerBits) == 0,
               "the scan's bits must leave the owner's alone");
 constexpr std::uint8_t kWatched = kFlagged | kListed;
 constexpr std::uint8_t kSeen = kVisitedDeep | kVisitedShallow | kHit;  ///< this scan's evidence
@@ -140,8 +142,8 @@ public:
     flags_ = watch_.scratch;
     if (watching_ && flags_ == nullptr)
     {
-      own_scratch_.assign(g_.cellCount(), 0);
-      flags_ = own_scratch_.data();
+      own_scratch_.assign(g_.cellCount());
+      flags_ = &own_scratch_;
     }
     setListed(true);
     seen_cells_.clear();
@@ -189,18 +191,18 @@ private:
     {
       for (std::uint32_t index : *list)
       {
-        flags_[index] = listed ? (flags_[index] | kListed) : (flags_[index] & ~kListed);
+        listed ? flags_->set(index, kListed) : flags_->clear(index, kListed);
       }
     }
   }
   /// @brief Records evidence for a watched cell; the first time, the cell joins the cells to read back.
   void note(std::uint32_t index, std::uint8_t evidence)
   {
-    if (!(flags_[index] & kSeen))
+    if (!(flags_->get(index) & kSeen))
     {
       seen_cells_.push_back(index);
     }
-    flags_[index] |= evidence;
+    flags_->set(index, evidence);
   }
   void clearPass();
   /// @brief Endpoints farther than this (squared, planar) cannot lie in a watched cell; -1: none can. Only needed
@@ -223,8 +225,8 @@ private:
   const ScanLimits& limits_;
   const ScanWatch& watch_;
   ScanTouch touch_;
-  std::vector<std::uint8_t> own_scratch_;
-  std::uint8_t* flags_ = nullptr;
+  CellFlags own_scratch_;
+  CellFlags* flags_ = nullptr;
   std::vector<std::uint32_t>& seen_cells_;  ///< watched cells given evidence by this scan, each once
   std::vector<double>& range_sq_;
   scan_detail::BeamIndex* beams_ = nullptr;
@@ -249,6 +251,11 @@ void ScanRun::validateWatch() const
       }
     }
   }
+  if (!watch_.point_cells.empty() && watch_.point_cells.size() != observation_.points.size())
+  {
+    throw std::invalid_argument("applyScan: point_cells holds " + std::to_string(watch_.point_cells.size()) +
+                                " cells for " + std::to_string(observation_.points.size()) + " points");
+  }
   if (watch_.free_neighbours > 10000)
   {
     throw std::invalid_argument("applyScan: free_neighbours must be <= 10000, got " +
@@ -259,9 +266,9 @@ void ScanRun::validateWatch() const
     throw std::invalid_argument("applyScan: free_margin must be finite and >= 0, got " +
                                 std::to_string(watch_.free_margin));
   }
-  if (watch_.scratch != nullptr && watch_.scratch_size != cell_count)
+  if (watch_.scratch != nullptr && watch_.scratch->size() != cell_count)
   {
-    throw std::invalid_argument("applyScan: scratch holds " + std::to_string(watch_.scratch_size) +
+    throw std::invalid_argument("applyScan: scratch holds " + std::to_string(watch_.scratch->size()) +
                                 " cells, the grid " + std::to_string(cell_count));
   }
 }
@@ -316,7 +323,17 @@ void ScanRun::clearPass()
       clipped = true;
     }
     unsigned int x1 = 0, y1 = 0;
-    if (!g_.worldToMap(wx, wy, x1, y1))
+    if (!clipped && !watch_.point_cells.empty())  // looked up by the caller
+    {
+      const ScanWatch::Cell cell = watch_.point_cells[pi];
+      if (cell.x == ScanWatch::kNoCell)
+      {
+        continue;
+      }
+      x1 = cell.x;
+      y1 = cell.y;
+    }
+    else if (!g_.worldToMap(wx, wy, x1, y1))
     {
       continue;
     }
@@ -389,8 +406,10 @@ void ScanRun::markPass()
   const double sq_obstacle_range = limits_.obstacle_range * limits_.obstacle_range;
   const double ox = ox_, oy = oy_, oz = observation_.origin.z;
   const double sq_hit_range = watching_ && !clearing_ ? hitRangeSquared() : -1.0;
-  for (const Point3& p : observation_.points)
+  const bool have_cells = !watch_.point_cells.empty();
+  for (std::size_t pi = 0; pi < observation_.points.size(); ++pi)
   {
+    const Point3& p = observation_.points[pi];
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || p.z < limits_.min_obstacle_height ||
         p.z > limits_.max_obstacle_height)
     {
@@ -404,13 +423,24 @@ void ScanRun::markPass()
       continue;
     }
     unsigned int mx = 0, my = 0;
-    if (!g_.worldToMap(p.x, p.y, mx, my))
+    std::uint32_t index = 0;
+    if (have_cells)
+    {
+      const ScanWatch::Cell cell = watch_.point_cells[pi];
+      if (cell.x == ScanWatch::kNoCell)
+      {
+        continue;
+      }
+      mx = cell.x;
+      my = cell.y;
+    }
+    else if (!g_.worldToMap(p.x, p.y, mx, my))
     {
       continue;
     }
-    const std::uint32_t index = g_.getIndex(mx, my);
-    if (watching_ && (flags_[index] & kWatched) && !(flags_[index] & kHit) &&
-        ((flags_[index] & kListed) || inRegion(watch_.regions, mx, my)))
+    index = g_.getIndex(mx, my);
+    const std::uint8_t f = watching_ ? flags_->get(index) : 0;
+    if ((f & kWatched) && !(f & kHit) && ((f & kListed) || inRegion(watch_.regions, mx, my)))
     {
       note(index, kHit);
     }
@@ -478,7 +508,7 @@ void ScanRun::walkWatched()
   }
   // Cells covered by no region are walked one by one.
   const auto walk_cell = [&](std::uint32_t index) {
-    if ((flags_[index] & (kVisitedDeep | kVisitedShallow)) || costs_[index] == LETHAL_OBSTACLE)
+    if ((flags_->get(index) & (kVisitedDeep | kVisitedShallow)) || costs_[index] == LETHAL_OBSTACLE)
     {
       return;  // a duplicate walked already, or marked by this scan
     }
@@ -499,7 +529,8 @@ void ScanRun::walkRegion(const CellRect& r)
     if (beam.end_is_point && r.contains(static_cast<int>(beam.end_x), static_cast<int>(beam.end_y)))
     {
       const std::uint32_t end = g_.getIndex(beam.end_x, beam.end_y);
-      if ((flags_[end] & kWatched) && !(flags_[end] & kHit))  // an endpoint in a watched cell, at any range
+      const std::uint8_t f = flags_->get(end);
+      if ((f & kWatched) && !(f & kHit))  // an endpoint in a watched cell, at any range
       {
         note(end, kHit);
       }
@@ -545,7 +576,7 @@ void ScanRun::walkRegion(const CellRect& r)
       {
         const int a = a0 + line.sign_a * static_cast<int>(i);
         const std::uint32_t index = line.x_major ? g_.getIndex(a, b) : g_.getIndex(b, a);
-        if (flags_[index] & kWatched)
+        if (flags_->get(index) & kWatched)
         {
           if (beam.own_steps == scan_detail::BeamIndex::kUnset)
           {
@@ -581,15 +612,16 @@ void ScanRun::readBack()
   std::size_t hits = 0, passed = 0;  // sizes first: one allocation per list, none for an empty one
   for (std::uint32_t index : seen_cells_)
   {
-    hits += (flags_[index] & kHit) != 0;
-    passed += (flags_[index] & (kVisitedDeep | kVisitedShallow)) != 0;
+    const std::uint8_t f = flags_->get(index);
+    hits += (f & kHit) != 0;
+    passed += (f & (kVisitedDeep | kVisitedShallow)) != 0;
   }
   touch_.watched_hit.reserve(hits);
   touch_.watched_cleared.reserve(passed);
   for (std::uint32_t index : seen_cells_)
   {
-    const std::uint8_t f = flags_[index];
-    flags_[index] = f & ~kSeen;
+    const std::uint8_t f = flags_->get(index);
+    flags_->clear(index, kSeen);
     if (f & kHit)
     {
       touch_.watched_hit.push_back(index);

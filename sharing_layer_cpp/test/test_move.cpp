@@ -6,14 +6,19 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 #include <set>
+#include <string>
 #include <stdexcept>
 #include <utility>
 #include <vector>
 
+#include "sharing_layer/bit_grid.h"
+#include "sharing_layer/cell_flags.h"
 #include "sharing_layer/cost_values.h"
 #include "sharing_layer/sharing_core.h"
 #include "sim_scan.h"
+#include "../bench/reference_scene.h"
 
 using namespace sharing_layer;
 using namespace sharing_layer::test;
@@ -420,28 +425,110 @@ TEST(Monitoring, AnExpiredObstacleLeavesTheRectangleOfAnOverlappingOneMonitored)
   EXPECT_FALSE(core.shareableCells().empty()) << "with no obstacle left the block's face is this robot's candidate";
 }
 
-TEST(OneGrid, SharingAddsAtMostOneAndFiveEighthsBytesPerCellWithEveryPerCellFactInUse)
+TEST(OneGrid, SharingAddsAtMostOneBytePerCellOnTheReferenceWarehouse)
 {
-  // Issue 13: ObstacleLayer keeps one byte per cell; what sharing adds is one byte of flags (present shared cells,
-  // shareable, remembered, steady, a scan's own evidence bits) and a bit per cell for each yes/no fact: inside a
-  // monitored rectangle, a static wall, unknown in the map, near either (the static filter), under a fleet robot.
-  SharingCore core = makeCore();
-  const GridGeometry g = core.geometry();
+  // Issues 13 and 29: ObstacleLayer keeps one byte per cell; what sharing keeps beside it must stay within one more,
+  // with every per-cell fact in use: the static map's walls and its unknown outside the hall (and the static filter
+  // grown from both), ten fleet robots, the 100 crates shared as obstacles (their monitored rectangles and present
+  // cells), and the flags of scans that marked, cleared, remembered and watched. The old layout (a flags byte per
+  // cell and a bit per cell per fact) held 1.625 bytes per cell here.
+  const bench::Scene scene = bench::makeScene();
+  const GridGeometry& g = scene.geometry;
   const std::size_t cells = g.cellCount();
+  LayerParams params;
+  params.limits.obstacle_range = 2.5;
+  params.limits.raytrace_range = 30.0;
+  params.limits.max_obstacle_height = 2.0;
+  params.robot_name = "robot_0";
+  SharingCore core(g, params);
   std::vector<std::uint8_t> walls(cells, FREE_SPACE), unknown(cells, 0);
-  walls[0] = LETHAL_OBSTACLE;
-  unknown[cells - 1] = 1;
+  for (unsigned int y = 0; y < g.size_y; ++y)
+  {
+    for (unsigned int x = 0; x < g.size_x; ++x)
+    {
+      const std::uint32_t i = g.getIndex(x, y);
+      double wx = 0.0, wy = 0.0;
+      g.mapToWorld(x, y, wx, wy);
+      walls[i] = scene.map[i] ? LETHAL_OBSTACLE : FREE_SPACE;
+      unknown[i] = !scene.map[i] && (wx < 20.0 || wx > 80.0 || wy < 30.0 || wy > 70.0);
+    }
+  }
   core.setStaticMap(walls.data(), cells);
   core.setUnknownMap(unknown.data(), cells);
-  FleetRobot robot;
-  robot.name = "robot_1";
-  robot.footprint = { { 1.0, 1.0 }, { 1.5, 1.0 }, { 1.5, 1.5 }, { 1.0, 1.5 } };
-  robot.stamp = 0.0;
-  core.fleetRobots().update(robot);
-  ASSERT_TRUE(core.fleetRobots().excludes(g.getIndex(25, 25)));
-  // 1 byte + 5 bits per cell, and the bit grids' rounding to 64-bit words
-  const std::size_t limit = cells + 5 * ((cells + 63) / 64) * 8;
-  EXPECT_LE(core.perCellBytes(), limit) << core.perCellBytes() / static_cast<double>(cells) << " bytes per cell";
-  EXPECT_GE(core.perCellBytes(), cells) << "the flags byte is counted";
+  for (int k = 0; k < 10; ++k)
+  {
+    const double cx = 30.0 + 4.0 * k, cy = 45.0;
+    FleetRobot robot;
+    robot.name = "robot_" + std::to_string(k + 1);
+    robot.footprint = { { cx - 0.3, cy - 0.3 }, { cx + 0.3, cy - 0.3 }, { cx + 0.3, cy + 0.3 },
+                        { cx - 0.3, cy + 0.3 } };
+    core.fleetRobots().update(robot);
+  }
+  for (int i = 0; i < bench::kCrates; ++i)
+  {
+    ASSERT_TRUE(core.applyShared(bench::crateUpdate(scene, i), 0.0).ok);
+  }
+  for (int r = 0; r < 3; ++r)
+  {
+    core.processScan(scene.scan, 0.1 * r);
+  }
+  ASSERT_TRUE(core.fleetRobots().excludes(g.getIndex(600, 900)));
+  EXPECT_LE(core.perCellBytes(), cells) << core.perCellBytes() / static_cast<double>(cells) << " bytes per cell";
+  EXPECT_GE(core.perCellBytes(), cells / 32) << "the flags' directory alone is 1/32 byte per cell";
   RecordProperty("bytes_per_cell_x1000", static_cast<int>(1000 * core.perCellBytes() / cells));
+}
+
+TEST(OneGrid, TiledBitsAndFlagsReadAsOneValuePerCellAndHoldMemoryOnlyWhereMixed)
+{
+  // BitGrid and CellFlags keep only tiles with something in them (BitGrid: neither all false nor all true). Random
+  // sets and resets against a plain array, then everything undone: what they read must agree at every step, and the
+  // tiles must be given back.
+  const std::size_t cells = 5 * BitGrid::kTileCells + 77;
+  std::mt19937 rng(7);
+  BitGrid bits;
+  bits.assign(cells);
+  CellFlags flags;
+  flags.assign(cells);
+  std::vector<std::uint8_t> plain_bits(cells, 0), plain_flags(cells, 0);
+  const std::size_t empty_bits = bits.bytes(), empty_flags = flags.bytes();
+  for (int step = 0; step < 20000; ++step)
+  {
+    // Runs of one value over a stretch of cells, so that whole tiles become all true too.
+    const std::size_t from = rng() % cells, length = 1 + rng() % (2 * BitGrid::kTileCells);
+    const bool value = rng() % 2 == 0;
+    const std::uint8_t bit = static_cast<std::uint8_t>(1u << (rng() % 8));
+    for (std::size_t i = from; i < std::min(cells, from + length); ++i)
+    {
+      bits.set(i, value);
+      plain_bits[i] = value;
+      if (rng() % 8 == 0)
+      {
+        value ? flags.set(static_cast<std::uint32_t>(i), bit) : flags.clear(static_cast<std::uint32_t>(i), bit);
+        plain_flags[i] = value ? (plain_flags[i] | bit) : (plain_flags[i] & ~bit);
+      }
+    }
+    if (step % 1000 == 0)
+    {
+      for (std::size_t i = 0; i < cells; ++i)
+      {
+        ASSERT_EQ(plain_bits[i] != 0, bits.test(i)) << "step " << step << ", cell " << i;
+        ASSERT_EQ(plain_flags[i], flags.get(static_cast<std::uint32_t>(i))) << "step " << step << ", cell " << i;
+      }
+    }
+  }
+  for (bool value : { true, false })  // all true: every tile is the shared constant again; then all false
+  {
+    for (std::size_t i = 0; i < cells; ++i)
+    {
+      bits.set(i, value);
+      flags.clear(static_cast<std::uint32_t>(i), 0xFF);
+    }
+    // (all true, the last tile, of 77 cells, is mixed: the bits beyond the grid stay false)
+    EXPECT_EQ(value ? 1u : 0u, bits.mixedTiles()) << "all " << value;
+    EXPECT_EQ(0u, flags.tilesInUse());
+  }
+  EXPECT_FALSE(bits.test(cells - 1));
+  EXPECT_EQ(0, flags.get(static_cast<std::uint32_t>(cells - 1)));
+  EXPECT_GE(bits.bytes(), empty_bits);
+  EXPECT_GE(flags.bytes(), empty_flags);
 }

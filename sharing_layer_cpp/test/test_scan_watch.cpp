@@ -18,6 +18,17 @@ using namespace sharing_layer;
 
 namespace
 {
+/// @return every cell's byte of the flags
+std::vector<std::uint8_t> bytesOf(const CellFlags& flags)
+{
+  std::vector<std::uint8_t> bytes(flags.size());
+  for (std::size_t i = 0; i < bytes.size(); ++i)
+  {
+    bytes[i] = flags.get(static_cast<std::uint32_t>(i));
+  }
+  return bytes;
+}
+
 struct Expected
 {
   std::vector<std::uint32_t> cleared, free, hit;
@@ -164,23 +175,22 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
       g.worldToMap(p.x, p.y, mx, my);
       watch.loose_cells.push_back(g.getIndex(mx, my));
     }
-    std::vector<std::uint8_t> scratch;
+    CellFlags scratch;
     if (rng() % 2 == 0)
     {
-      scratch.assign(g.cellCount(), 0);
-      watch.scratch = scratch.data();
-      watch.scratch_size = scratch.size();
+      scratch.assign(g.cellCount());
+      watch.scratch = &scratch;
     }
 
     const Expected expected = oracle(g, obs, limits, watch);
     // An owner that keeps its watched cells flagged in the scratch instead of listing them gets the same result;
     // flagged cells outside every region are not watched.
     std::vector<std::uint8_t> flagged_before;
-    if (!scratch.empty() && with_regions && rng() % 2 == 0)
+    if (scratch.size() != 0 && with_regions && rng() % 2 == 0)
     {
       for (std::uint32_t c : watch.cells)
       {
-        scratch[c] = ScanWatch::kFlaggedWatched;
+        scratch.set(c, ScanWatch::kFlaggedWatched);
       }
       watch.cells.clear();
       for (int i = 0, k = static_cast<int>(rng() % 20); i < k; ++i)
@@ -191,14 +201,15 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
         if (std::none_of(watch.regions.begin(), watch.regions.end(),
                          [&](const CellRect& r) { return r.contains(static_cast<int>(cx), static_cast<int>(cy)); }))
         {
-          scratch[c] = ScanWatch::kFlaggedWatched;
+          scratch.set(c, ScanWatch::kFlaggedWatched);
         }
       }
       for (int i = 0, k = static_cast<int>(rng() % 40); i < k; ++i)  // the owner's bits: neither read nor changed
       {
-        scratch[rng() % g.cellCount()] |= static_cast<std::uint8_t>(rng() % 8) << 5;
+        const std::uint32_t c = static_cast<std::uint32_t>(rng() % g.cellCount());
+        scratch.set(c, static_cast<std::uint8_t>((rng() % 8) << 5));
       }
-      flagged_before = scratch;
+      flagged_before = bytesOf(scratch);
     }
     const ScanTouch touch = applyScan(grid, obs, limits, watch);
     ASSERT_EQ(expected.cleared, touch.watched_cleared) << "trial " << trial;
@@ -206,12 +217,15 @@ TEST(ScanWatch, FindsExactlyTheCellsAFullWalkFinds)
     ASSERT_EQ(expected.hit, touch.watched_hit) << "trial " << trial;
     if (flagged_before.empty())
     {
-      ASSERT_TRUE(std::all_of(scratch.begin(), scratch.end(), [](std::uint8_t f) { return f == 0; }))
+      const std::vector<std::uint8_t> after = bytesOf(scratch);
+      ASSERT_TRUE(std::all_of(after.begin(), after.end(), [](std::uint8_t f) { return f == 0; }))
           << "trial " << trial << ": the scratch must come back zeroed";
+      ASSERT_EQ(0u, scratch.tilesInUse()) << "trial " << trial << ": a tile with no bit left is given back";
     }
     else
     {
-      ASSERT_EQ(flagged_before, scratch) << "trial " << trial << ": the flagged cells must come back as they were";
+      ASSERT_EQ(flagged_before, bytesOf(scratch))
+          << "trial " << trial << ": the flagged cells must come back as they were";
       ++flagged_trials;
     }
     results += expected.cleared.size() + expected.free.size() + expected.hit.size();
@@ -227,16 +241,15 @@ TEST(ScanWatch, ScratchOfTheWrongSizeIsRefused)
   Observation obs;
   obs.origin = Point3{ 0.05, 0.05, 0.0 };
   obs.points = { Point3{ 0.85, 0.05, 0.0 } };
-  std::vector<std::uint8_t> scratch(50, 0);
+  CellFlags scratch;
+  scratch.assign(50);
   ScanWatch watch;
   watch.cells = { 3 };
-  watch.scratch = scratch.data();
-  watch.scratch_size = scratch.size();
+  watch.scratch = &scratch;
   EXPECT_THROW(applyScan(grid, obs, ScanLimits(), watch), std::invalid_argument);
   watch.cells.clear();
   watch.loose_cells = { 100 };  // outside the grid
   watch.scratch = nullptr;
-  watch.scratch_size = 0;
   EXPECT_THROW(applyScan(grid, obs, ScanLimits(), watch), std::invalid_argument);
 }
 
@@ -255,14 +268,15 @@ TEST(ScanWatch, AClippedEndpointIsNoHit)
   for (const bool flagged : { false, true })
   {
     CostGrid grid(g, FREE_SPACE);
-    std::vector<std::uint8_t> scratch(g.cellCount(), 0);
+    CellFlags scratch;
+    scratch.assign(g.cellCount());
     ScanWatch watch;
-    watch.scratch = scratch.data();
-    watch.scratch_size = scratch.size();
+    watch.scratch = &scratch;
     watch.regions = { CellRect{ 9, 5, 9, 5 }, CellRect{ 5, 9, 5, 9 } };
     if (flagged)
     {
-      scratch[edge] = scratch[end_in_grid] = ScanWatch::kFlaggedWatched;
+      scratch.set(edge, ScanWatch::kFlaggedWatched);
+      scratch.set(end_in_grid, ScanWatch::kFlaggedWatched);
     }
     else
     {
@@ -271,5 +285,54 @@ TEST(ScanWatch, AClippedEndpointIsNoHit)
     const ScanTouch touch = applyScan(grid, obs, limits, watch);
     EXPECT_EQ(std::vector<std::uint32_t>{ end_in_grid }, touch.watched_hit) << "flagged " << flagged;
     EXPECT_EQ(std::vector<std::uint32_t>{ edge }, touch.watched_free) << "flagged " << flagged;
+  }
+}
+
+TEST(ScanWatch, PointCellsGivenByTheCallerChangeNothing)
+{
+  // ScanPass looks each point's cell up once and hands them to applyScan (ScanWatch::point_cells): grids, marks,
+  // bounds and evidence must be exactly those of a scan that looks them up itself, with points off the grid (clipped
+  // beams), not finite and outside the height limits among them. A list of another length is refused.
+  std::mt19937 rng(29);
+  const GridGeometry g(0.05, -1.0, 2.0, 80, 60);
+  std::uniform_real_distribution<double> ux(g.origin_x - 1.0, g.endX() + 1.0), uy(g.origin_y - 1.0, g.endY() + 1.0);
+  for (int trial = 0; trial < 300; ++trial)
+  {
+    Observation obs;
+    obs.origin = Point3{ g.origin_x + 2.0, g.origin_y + 1.5, 0.3 };
+    for (int i = 0; i < 200; ++i)
+    {
+      const double z = rng() % 10 == 0 ? 5.0 : 0.3;
+      obs.points.push_back(rng() % 50 == 0 ? Point3{ NAN, 1.0, 0.3 } : Point3{ ux(rng), uy(rng), z });
+    }
+    ScanLimits limits;
+    limits.obstacle_range = 0.5 + (rng() % 30) * 0.1;
+    limits.raytrace_range = 0.5 + (rng() % 40) * 0.1;
+    limits.max_obstacle_height = 2.0;
+    ScanWatch watch;
+    watch.regions = { CellRect{ 10, 10, 30, 25 } };
+    watch.cells = ScanWatch::fromRects(g, watch.regions).cells;
+    CostGrid plain(g, NO_INFORMATION), given(g, NO_INFORMATION);
+    const ScanTouch expected = applyScan(plain, obs, limits, watch);
+    for (const Point3& p : obs.points)
+    {
+      ScanWatch::Cell cell{ ScanWatch::kNoCell, 0 };
+      if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && p.z <= limits.max_obstacle_height &&
+          !g.worldToMap(p.x, p.y, cell.x, cell.y))
+      {
+        cell.x = ScanWatch::kNoCell;
+      }
+      watch.point_cells.push_back(cell);
+    }
+    const ScanTouch touch = applyScan(given, obs, limits, watch);
+    ASSERT_TRUE(std::equal(plain.data(), plain.data() + g.cellCount(), given.data())) << "trial " << trial;
+    ASSERT_EQ(expected.marked, touch.marked) << "trial " << trial;
+    ASSERT_EQ(expected.watched_cleared, touch.watched_cleared) << "trial " << trial;
+    ASSERT_EQ(expected.watched_free, touch.watched_free) << "trial " << trial;
+    ASSERT_EQ(expected.watched_hit, touch.watched_hit) << "trial " << trial;
+    ASSERT_EQ(expected.min_x, touch.min_x);
+    ASSERT_EQ(expected.max_y, touch.max_y);
+    watch.point_cells.pop_back();
+    EXPECT_THROW(applyScan(given, obs, limits, watch), std::invalid_argument);
   }
 }

@@ -3,42 +3,137 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
+#include <utility>
 #include <vector>
-
-#include "sharing_layer/scan_update.h"
 
 namespace sharing_layer
 {
 /**
- * @brief One byte per cell of yes/no facts that several passes read in the same loop, kept together so that a scan
- * touches one byte per cell, not one array per fact. Who owns which bit:
- * - ScanWatch::kFlaggedWatched: a present cell of a shared obstacle (FleetObstacles sets it, kept between scans);
- * - the scan's own scratch bits, during applyScan only (it leaves them as it found them);
- * - kShareable and kRemembered: the cell is in ObservedCells' shareable list or trigger memory (kept with them);
- * - kSteady: a growth candidate of the current scan (ScanPass sets it and clears it before it returns).
+ * @brief A byte of yes/no facts per cell that several passes read in the same loop, kept together so that a scan
+ * reads one byte per cell, not one array per fact. Who owns which bit:
+ * - kFlaggedWatched: a present cell of a shared obstacle (FleetObstacles sets it, kept between scans);
+ * - the scan's own bits (kScanBits), during applyScan only (it leaves them as it found them);
+ * - kShareable and kRemembered: the cell is in ObservedCells' shareable list or trigger memory (kept with them).
+ *
+ * Every bit is set on few cells (those of shared obstacles, of this robot's recent marks, of a scan's watch), so the
+ * bytes are kept in tiles of kTileCells consecutive cells, and only a tile with a bit set takes memory: the grid
+ * costs a directory of 4 bytes per tile (1/32 byte per cell) plus kTileCells bytes per tile in use (issue 29). A
+ * cell of a tile not in use reads 0 (a shared tile of zeros); a tile whose last bit is cleared is given back.
  */
 class CellFlags
 {
 public:
-  static constexpr std::uint8_t kSteady = 0x80;
+  static constexpr std::uint8_t kFlaggedWatched = 0x01;
+  static constexpr std::uint8_t kScanBits = 0x1E;  ///< applyScan's (see scan_update.cpp)
   static constexpr std::uint8_t kRemembered = 0x40;
   static constexpr std::uint8_t kShareable = 0x20;
-  static_assert(((kSteady | kRemembered | kShareable) & ~ScanWatch::kOwnerBits) == 0,
-                "the layer's own cell flags must be owner bits of the scan's scratch");
+  /// applyScan leaves these alone (kRemembered, kShareable and one spare)
+  static constexpr std::uint8_t kOwnerBits = 0xE0;
+  static constexpr std::size_t kTileCells = 128;
 
   /// @brief cell_count cells, no bit set.
-  void assign(std::size_t cell_count) { bytes_.assign(cell_count, 0); }
-  bool has(std::uint32_t index, std::uint8_t bit) const { return (bytes_[index] & bit) != 0; }
-  void set(std::uint32_t index, std::uint8_t bit) { bytes_[index] |= bit; }
-  void clear(std::uint32_t index, std::uint8_t bit) { bytes_[index] &= static_cast<std::uint8_t>(~bit); }
-  std::uint8_t* data() { return bytes_.data(); }
-  const std::uint8_t* data() const { return bytes_.data(); }
-  std::size_t size() const { return bytes_.size(); }
-  std::size_t bytes() const { return bytes_.capacity(); }
-  void swap(CellFlags& other) { bytes_.swap(other.bytes_); }
+  void assign(std::size_t cell_count)
+  {
+    release();
+    size_ = cell_count;
+    dir_.assign((cell_count + kTileCells - 1) / kTileCells, 0);
+    pool_.assign(kTileCells, 0);  // tile 0: the shared zeros
+  }
+  /// @brief No cells (and no memory).
+  void release()
+  {
+    std::vector<std::uint32_t>().swap(dir_);
+    std::vector<std::uint8_t>().swap(pool_);
+    std::vector<std::uint32_t>().swap(free_);
+    size_ = 0;
+  }
+  /// @return the cell's byte (0 in a tile not in use)
+  std::uint8_t get(std::uint32_t index) const
+  {
+    return pool_[dir_[index / kTileCells] * kTileCells + index % kTileCells];
+  }
+  bool has(std::uint32_t index, std::uint8_t bit) const { return (get(index) & bit) != 0; }
+  void set(std::uint32_t index, std::uint8_t bits)
+  {
+    std::uint32_t& tile = dir_[index / kTileCells];
+    if (tile == 0)
+    {
+      if (bits == 0)
+      {
+        return;
+      }
+      tile = newTile();
+    }
+    pool_[tile * kTileCells + index % kTileCells] |= bits;
+  }
+  void clear(std::uint32_t index, std::uint8_t bits)
+  {
+    std::uint32_t& tile = dir_[index / kTileCells];
+    if (tile == 0)
+    {
+      return;
+    }
+    std::uint8_t& byte = pool_[tile * kTileCells + index % kTileCells];
+    byte &= static_cast<std::uint8_t>(~bits);
+    if (byte == 0)
+    {
+      settle(tile);
+    }
+  }
+  std::size_t size() const { return size_; }
+  /// @return the heap it holds: directory, tiles (with what their vectors reserved) and the free list
+  std::size_t bytes() const
+  {
+    return dir_.capacity() * sizeof(std::uint32_t) + pool_.capacity() + free_.capacity() * sizeof(std::uint32_t);
+  }
+  /// @return the tiles in use
+  std::size_t tilesInUse() const { return pool_.empty() ? 0 : pool_.size() / kTileCells - 1 - free_.size(); }
+  void swap(CellFlags& other)
+  {
+    dir_.swap(other.dir_);
+    pool_.swap(other.pool_);
+    free_.swap(other.free_);
+    std::swap(size_, other.size_);
+  }
 
 private:
-  std::vector<std::uint8_t> bytes_;
+  std::uint32_t newTile()
+  {
+    std::uint32_t tile = 0;
+    if (!free_.empty())
+    {
+      tile = free_.back();
+      free_.pop_back();
+    }
+    else
+    {
+      tile = static_cast<std::uint32_t>(pool_.size() / kTileCells);
+      pool_.resize(pool_.size() + kTileCells, 0);
+    }
+    return tile;
+  }
+  /// @brief Gives a tile (at `slot` in the directory) back once none of its cells holds a bit.
+  void settle(std::uint32_t& slot)
+  {
+    const std::uint8_t* bytes = &pool_[slot * kTileCells];
+    for (std::size_t i = 0; i < kTileCells; i += sizeof(std::uint64_t))
+    {
+      std::uint64_t w = 0;
+      std::memcpy(&w, bytes + i, sizeof(w));
+      if (w != 0)
+      {
+        return;
+      }
+    }
+    free_.push_back(slot);
+    slot = 0;
+  }
+
+  std::vector<std::uint32_t> dir_;   ///< per tile: its place in pool_ (0: not in use, reads as zeros)
+  std::vector<std::uint8_t> pool_;   ///< the tiles in use, kTileCells bytes each; the first is the shared zeros
+  std::vector<std::uint32_t> free_;  ///< tiles of pool_ given back
+  std::size_t size_ = 0;
 };
 
 }  // namespace sharing_layer

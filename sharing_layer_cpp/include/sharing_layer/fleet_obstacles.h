@@ -123,8 +123,9 @@ private:
    */
   void growInto(SharedObstacle& obstacle, std::vector<std::uint32_t>& steady, std::vector<std::uint32_t>& marked,
                 int gap, const GridGeometry& g, ObservedCells& observed, CellFlags& flags);
-  /// @return whether a kSteady cell lies within gap cells around the rectangle, outside it
-  static bool steadyInRing(const CellRect& rect, int gap, const GridGeometry& g, const CellFlags& flags);
+  /// @return whether one of the (growth candidate) cells lies within gap cells around the rectangle, outside it
+  static bool steadyInRing(const CellRect& rect, int gap, const GridGeometry& g,
+                           const std::vector<std::uint32_t>& steady);
   /// @brief One obstacle in view: its evidence into marked/cleared cells; @return whether it has an update
   bool monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence, double now_s, const LayerParams& params,
                   const ShareRules& rules, const GridGeometry& g, ObservedCells& observed, CellFlags& flags);
@@ -133,7 +134,7 @@ private:
   void refreshViewIndex();
 
   std::map<std::string, SharedObstacle> shared_;
-  BitGrid monitored_;  ///< a bit per cell: a shared obstacle's rectangle covers it
+  BitGrid monitored_;  ///< a bit per cell (in tiles): a shared obstacle's rectangle covers it
   /// The obstacles with cells on the grid and their rectangles, side by side: the in-view test of every scan.
   struct ViewEntry
   {

@@ -88,8 +88,8 @@ public:
                 double now_s, double trigger_memory, unsigned int clearing_scans, double clearing_time,
                 const ShareRules& rules, CellFlags& flags);
   /// @brief Shareable cells marked steadily (in clearing_scans scans in a row over clearing_time): growth candidates
-  /// of shared obstacles, into `steady`, each flagged kSteady (the caller clears the flags after the scan).
-  void steadyShareable(unsigned int clearing_scans, double clearing_time, CellFlags& flags,
+  /// of shared obstacles, into `steady`.
+  void steadyShareable(unsigned int clearing_scans, double clearing_time, const CellFlags& flags,
                        std::vector<std::uint32_t>& steady) const;
 
   // Changes from the other parts.

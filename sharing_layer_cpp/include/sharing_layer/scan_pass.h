@@ -75,7 +75,8 @@ public:
 private:
   /// @brief Fills the watch: the present cells of obstacles in view (their boxes), the remembered cells in reach.
   void prepareWatch(const Observation& observation, double now_s, double view_radius, ScanParts& parts);
-  /// @brief Cells this scan will mark that are not lethal yet (not_lethal_before_), and its far endpoints.
+  /// @brief Each usable point's cell (for applyScan: watch_.point_cells), the cells this scan will mark that are not
+  /// lethal yet (not_lethal_before_), and its far endpoints.
   void collectNewMarks(const Observation& observation, const ScanLimits& limits, ScanParts& parts);
   /// @brief Signs of occupancy among the watched cells (occupied_): marked, an endpoint in it, or a beam that
   /// ended close behind it.
@@ -89,8 +90,7 @@ private:
   LastScan last_;
   std::vector<SharedObstacle*> in_view_;
   ScanWatch watch_;
-  std::vector<std::uint32_t> not_lethal_before_, grazed_, marked_known_, signs_, occupied_, marked_watched_, steady_,
-      steady_all_;
+  std::vector<std::uint32_t> not_lethal_before_, grazed_, marked_known_, signs_, occupied_, marked_watched_, steady_;
 };
 
 }  // namespace sharing_layer

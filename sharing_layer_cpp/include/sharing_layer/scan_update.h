@@ -3,6 +3,7 @@
 
 #include <vector>
 
+#include "sharing_layer/cell_flags.h"
 #include "sharing_layer/cost_grid.h"
 #include "sharing_layer/observation.h"
 
@@ -12,7 +13,7 @@ namespace sharing_layer
  * @brief Which cells a scan should report when it clears them: the present cells of the monitored
  * obstacles, since only a present cell can be cleared from an obstacle.
  *
- * Raytracing is left exactly as without a watch. The scan flags the watched cells in a scratch array, and
+ * Raytracing is left exactly as without a watch. The scan flags the watched cells in CellFlags, and
  * walks again only the beams pointing at a region, over the steps inside it: monitoring costs a pass over the
  * watched cells and a walk over the watched area in view, nothing per cell outside it.
  */
@@ -34,15 +35,23 @@ struct ScanWatch
   /// Watched as cells, but covered by no region (scattered cells): walked one by one, and only when this scan
   /// did not mark them again.
   std::vector<std::uint32_t> loose_cells;
-  /// Optional: a per-cell scratch array of the grid's size, which the scan leaves as it found it. Without it a
-  /// watching scan allocates one per call (as large as the grid). A cell may hold kFlaggedWatched: it is then
-  /// watched without being listed, when it lies in one of the regions (an owner that keeps its watched cells
-  /// flagged between scans does not list them in every scan). kOwnerBits are the owner's: the scan neither reads
-  /// nor changes them. The other bits must be zero.
-  std::uint8_t* scratch = nullptr;
-  std::size_t scratch_size = 0;
-  static constexpr std::uint8_t kFlaggedWatched = 0x01;
-  static constexpr std::uint8_t kOwnerBits = 0xE0;
+  /// Optional: per-cell flags of the grid's size, which the scan leaves as it found them. Without them a watching
+  /// scan uses flags of its own per call. A cell may hold kFlaggedWatched: it is then watched without being listed,
+  /// when it lies in one of the regions (an owner that keeps its watched cells flagged between scans does not list
+  /// them in every scan). kOwnerBits are the owner's: the scan neither reads nor changes them. The scan's own bits
+  /// (CellFlags::kScanBits) must be clear.
+  CellFlags* scratch = nullptr;
+  static constexpr std::uint8_t kFlaggedWatched = CellFlags::kFlaggedWatched;
+  /// Optional: the cell of each observation point, as GridGeometry::worldToMap gives it (x kNoCell where it fails or
+  /// where the point is not used), for a caller that looked them up already: the scan does not look them up again.
+  /// Empty, or one per point.
+  struct Cell
+  {
+    unsigned int x, y;
+  };
+  std::vector<Cell> point_cells;
+  static constexpr unsigned int kNoCell = 0xFFFFFFFFu;
+  static constexpr std::uint8_t kOwnerBits = CellFlags::kOwnerBits;
 
   /// @brief A watch over every cell of the given rectangles (clipped to the grid).
   static ScanWatch fromRects(const GridGeometry& geometry, const std::vector<CellRect>& rects);

@@ -32,7 +32,8 @@ namespace sharing_layer
  * The costmap_2d plugin and the project's navigation host both drive this class; all times are
  * passed in, in seconds. It owns the parts and lends them to the pass each call belongs to (README, "The units"):
  * ScanPass (scan_pass.h), Triggers (triggers.h), FleetObstacles (fleet_obstacles.h), the grid frame
- * (grid_frame.h); what they share is ObservedCells, StaticMask, FleetRobots and one CellFlags byte per cell.
+ * (grid_frame.h); what they share is ObservedCells, StaticMask, FleetRobots and CellFlags (a byte per cell, held
+ * only in tiles where a bit is set).
  */
 class SharingCore
 {
@@ -217,7 +218,7 @@ private:
   LayerParams params_;
   Triggers triggers_;          ///< the stuck and plan-blocked triggers, the plan
   CostGrid obstacles_;         ///< the obstacle grid (ObstacleLayer's), the core's own or a caller's buffer
-  CellFlags flags_;            ///< one byte per cell of facts the passes share
+  CellFlags flags_;            ///< a byte per cell of facts the passes share (tiles only where one is set)
   StaticMask statics_;         ///< walls and unknown map areas: never shared
   ObservedCells observed_;     ///< shareable cells and trigger memory
   FleetObstacles fleet_;       ///< the fleet's obstacles, monitored
