@@ -29,8 +29,8 @@ BENCHMARKS = {
     "bridge": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_bridge")],
                "Coaty bridge over mosquitto: events/s, latency, compact vs plain bytes"),
     "fleet_scale": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_fleet_scale")],
-                    "100 simulated robots on one mosquitto (latency to every peer, CPU, memory, bytes), "
-                    "then two bridged brokers"),
+                    "100 simulated robots on one mosquitto (latency to every robot that must apply an update, "
+                    "CPU, memory, bytes by kind), then on bridged brokers (--brokers, --bridged-robots)"),
     "flood": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_flood")],
               "one peer floods 5,000 valid new obstacles at 3 robots: p99 latency of another robot's obstacle, "
               "handler cost per update with 10,000 vs 10 held"),

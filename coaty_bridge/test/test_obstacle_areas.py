@@ -155,3 +155,23 @@ def test_bad_area_traffic_is_counted_and_dropped(make_client, make_update, obser
     observer.publish(str(Topic("fleet", "ADV", peer, object_type=OT + ".area_0_0")),
                      codec.advertise_payload(codec.obstacle_to_object(good, OT + ".area_0_0")))
     wait_for(lambda: [u for u in robot.received_updates if u.uuid == good.uuid], what="the good one")
+
+
+def test_an_area_update_queued_offline_goes_out_aged_under_its_area_objecttype(make_update):
+    """Offline, updates queue; sent later, their deadline is aged and the payload made again. It must
+    be made under the objectType of the topic it was queued for, or every receiver drops it
+    (wrong_type): the broker-restart test of test_partitions.py lost the update that way."""
+    now = [1000.0]
+    client = CoatyBridgeClient(BridgeConfig("robot_0"), lambda u, t: None, clock=lambda: now[0])  # never started
+    client.note_own_position((5.0, 5.0))
+    first = make_update(version=1, deadline=60)
+    client.publish_obstacle(first)                                    # queued, fleet-wide
+    client.publish_obstacle(marking(make_update, first, 2, (2001500,), deadline=60))   # queued, to its area
+    now[0] += 5.0
+    sent = []
+    client._send = lambda topic, payload, **kwargs: sent.append((topic, json.loads(payload)))
+    client._flush_queue()
+    assert [obj["object"]["deadline"] for _, obj in sent] == [55, 55], "not aged: the test shows nothing"
+    for topic, obj in sent:
+        assert topic.split("/")[3] == "ADV::" + obj["object"]["objectType"], topic
+    assert sent[1][1]["object"]["objectType"] == OT + ".area_0_0"

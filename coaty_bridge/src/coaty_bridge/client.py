@@ -824,7 +824,8 @@ class CoatyBridgeClient:
                     self._count("queue_expired")
                     continue
                 if fresh is not update:
-                    payload = self._obstacle_payload(fresh)
+                    # under the objectType it was queued with (an area's, or the plain one)
+                    payload = self._obstacle_payload(fresh, parse_topic(topic).object_type)
                 # its deadline is now valid as of now (should the send fail and re-queue it)
                 self._send(topic, payload, update=fresh, queued_at=now)
             else:
