@@ -6,7 +6,7 @@ import uuid as uuidlib
 
 import pytest
 
-from coaty_bridge import footprint as fp
+from coaty_bridge import areas, footprint as fp
 from coaty_bridge.client import BridgeConfig
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.topics import Topic
@@ -288,16 +288,16 @@ def test_every_order_of_adverts_keeps_the_newest_footprint_per_robot(delivered):
 # ------------------------------------------------------------------------------------------ areas
 
 def test_areas_are_floor_squares_and_their_object_types_parse_back():
-    assert fp.area_of((0.0, 0.0), 10.0) == (0, 0)
-    assert fp.area_of((9.999, -0.001), 10.0) == (0, -1)
-    assert fp.area_of((-10.0, 25.0), 10.0) == (-1, 2)
-    assert fp.area_object_type(OT, (-1, 2)) == OT + ".area_-1_2"
-    assert fp.areas_around((5.0, 5.0), 10.0) == {(x, y) for x in (-1, 0, 1) for y in (-1, 0, 1)}
+    assert areas.area_of((0.0, 0.0), 10.0) == (0, 0)
+    assert areas.area_of((9.999, -0.001), 10.0) == (0, -1)
+    assert areas.area_of((-10.0, 25.0), 10.0) == (-1, 2)
+    assert areas.area_object_type(OT, (-1, 2)) == OT + ".area_-1_2"
+    assert areas.areas_around((5.0, 5.0), 10.0) == {(x, y) for x in (-1, 0, 1) for y in (-1, 0, 1)}
     for good in (OT, OT + ".area_0_0", OT + ".area_-12_7"):
-        assert fp.is_footprint_object_type(good, OT), good
+        assert areas.is_scoped_object_type(good, OT), good
     for bad in ("org.other", OT + ".area_", OT + ".area_1", OT + ".area_1_2_3", OT + ".area_a_1",
                 OT + ".area_01_1", OT + ".area_+1_1", OT + ".area_1_ 1", OT + "X", OT + ".areax_1_1"):
-        assert not fp.is_footprint_object_type(bad, OT), bad
+        assert not areas.is_scoped_object_type(bad, OT), bad
 
 
 @pytest.mark.parametrize("bad", [-1.0, 0.5, 1e5, float("nan"), float("inf"), True, "10"])

@@ -9,7 +9,6 @@ its peers for their obstacles (late joiner). Bad input is dropped, logged once
 and counted; the MQTT thread never sees an exception.
 """
 import collections
-import json
 import logging
 import math
 import select
@@ -310,7 +309,7 @@ def _make_paho_client(client_id):
 #: Requesters whose Discover token buckets are remembered (the quietest are forgotten beyond).
 _MAX_DISCOVER_REQUESTERS = 4096
 # obstacles whose fleet-wide expiry is kept before expired entries are swept (a flood cannot grow it for long)
-_MAX_FLEET_EXPIRIES = 100000
+_MAX_FLEET_EXPIRIES = 400000
 
 #: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
 OWN_LOG_PER_OBSTACLE = 200
@@ -619,9 +618,13 @@ class CoatyBridgeClient:
     # ------------------------------------------------------------- outgoing
 
     def publish_obstacle(self, update):
-        """Publishes one internal ObstacleUpdate to the fleet (Advertise). Returns
-        False if it was dropped (too large); queues it while offline."""
-        payload = self._obstacle_payload(update)
+        """Publishes one internal ObstacleUpdate to the fleet (Advertise), fleet-wide or to the area
+        around the obstacle (``_area_for``). Returns False if it was dropped (too large); queues it
+        while offline."""
+        area = self._area_for(update)
+        object_type = self.config.object_type if area is None else areas.area_object_type(self.config.object_type,
+                                                                                            area)
+        payload = self._obstacle_payload(update, object_type)
         if len(payload) > self.config.max_payload_bytes:
             self._count("dropped_outgoing.oversized")
             LOG.warning("%s: obstacle %s v%d not published: %d bytes exceed max_payload_bytes %d",
@@ -631,35 +634,42 @@ class CoatyBridgeClient:
         self._count("published")
         self._count("bytes_published", len(payload))
         self._log_own(update)
-        area = self._scope_of(update)
         if area is None:
             self._count("published_fleet_wide")
             self._sent_fleet_wide(update)
             self._send(self._obstacle_topic, payload, update=update)
         else:
             self._count("published_to_area")
-            object_type = areas.area_object_type(self.config.object_type, area)
+            self._schedule_renewal(update)
             self._send(str(Topic(self.config.namespace, "ADV", self.identity_id, object_type=object_type)),
-                       self._obstacle_payload(update, object_type), update=update)
+                       payload, update=update)
         return True
 
-    def _scope_of(self, update):
+    def _obstacle_area(self, update):
+        """The obstacle area (at obstacle_area_size > 0) holding the centre of the update's rectangle."""
+        return areas.area_of(areas.rectangle_centre(update.rectangle), self.config.obstacle_area_size)
+
+    def _area_for(self, update):
         """The area an update goes to, or None for fleet-wide: a first share (every robot must plan around
         it), an update that marks nothing (it may end the obstacle: far robots must stop avoiding it), and
         any update while far robots hold no live copy this bridge knows of, go to every robot."""
-        size = self.config.obstacle_area_size
-        if size <= 0 or update.version <= 1 or not update.marked:
+        if self.config.obstacle_area_size <= 0 or update.version <= 1 or not update.marked:
             return None
-        now = self._clock()
         with self._lock:
             far = self._fleet_expiry.get(update.uuid)
-            if far is None or far <= now:
-                return None
+        if far is None or far <= self._clock():
+            return None
+        return self._obstacle_area(update)
+
+    def _schedule_renewal(self, update):
+        """An area-scoped update: when the robots near the obstacle will hold it longer than the far ones,
+        renew the far copies, fleet-wide, shortly before they expire (``renew_due``)."""
+        now = self._clock()
+        with self._lock:
+            far = self._fleet_expiry.get(update.uuid, -math.inf)
             if now + update.deadline > far:
-                # the robots near it will hold it longer than the far ones: renew theirs in time
                 margin = max(2.0, 0.1 * update.deadline)
                 self._renewals[update.uuid] = (max(now, far - margin), update, now)
-        return areas.area_of(areas.rectangle_centre(update.rectangle), size)
 
     def _sent_fleet_wide(self, update, now=None):
         """Every robot got ``update`` (sent or heard on the fleet-wide objectType): their copies live
@@ -672,7 +682,7 @@ class CoatyBridgeClient:
             renewal = self._renewals.get(update.uuid)
             if renewal is not None and renewal[2] + renewal[1].deadline <= expiry + 1.0:
                 del self._renewals[update.uuid]
-            if len(self._fleet_expiry) > 4 * _MAX_FLEET_EXPIRIES:
+            if len(self._fleet_expiry) > _MAX_FLEET_EXPIRIES:
                 for uuid in [u for u, t in self._fleet_expiry.items() if t <= now]:
                     del self._fleet_expiry[uuid]
 
@@ -705,8 +715,7 @@ class CoatyBridgeClient:
         self.note_own_position(where)
         object_type, topic = self.config.footprint_object_type, self._footprint_topic
         if self.config.footprint_area_size > 0:
-            object_type = footprints.area_object_type(
-                object_type, footprints.area_of(where, self.config.footprint_area_size))
+            object_type = areas.area_object_type(object_type, areas.area_of(where, self.config.footprint_area_size))
             topic = str(Topic(self.config.namespace, "ADV", self.identity_id, object_type=object_type))
         payload = footprints.footprint_payload(footprint, self.footprint_object_id, object_type)
         if len(payload) > self.config.max_payload_bytes:
@@ -1024,7 +1033,7 @@ class CoatyBridgeClient:
             elif topic.event == "ADV" and areas.parse_area(topic.object_type, self.config.object_type) is not None:
                 self._count("received_from_area")
                 self._deliver(codec.decode_advertise(data, topic.object_type, self.config.limits), topic)
-            elif topic.event == "ADV" and topic.object_type is not None and footprints.is_footprint_object_type(
+            elif topic.event == "ADV" and topic.object_type is not None and areas.is_scoped_object_type(
                     topic.object_type, self.config.footprint_object_type):
                 footprint = footprints.decode_footprint_advertise(data, topic.object_type)
                 if self._deliver_footprint(footprint, topic):
@@ -1139,6 +1148,16 @@ class CoatyBridgeClient:
         self._send(self._dad_topic, codec.deadvertise_payload([self.footprint_object_id]), queue=False)
         return True
 
+    def _resolve_obstacle(self, reply, update):
+        """Answers a Discover with one obstacle (a Resolve on ``reply``); False when it is too large."""
+        payload = codec.resolve_payload(
+            codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
+        if len(payload) > self.config.max_payload_bytes:
+            return False
+        self._send(reply, payload, queue=False)
+        self._count("resolves_sent")
+        return True
+
     def _discover_allowed(self, requester):
         """True when a Discover from `requester` may be answered now (its own token bucket; the
         longest-quiet requesters, whose buckets are full again, are forgotten first)."""
@@ -1155,23 +1174,14 @@ class CoatyBridgeClient:
         if request.identity:
             self._send(reply, codec.resolve_payload(self._identity), queue=False)
             self._count("resolves_sent")
-        if request.areas and not request.obstacles:
+        if request.areas and not request.obstacles and self.config.obstacle_area_size > 0:
             # a robot entering these areas: the updates it did not hear there (each robot replays its own)
-            size = self.config.obstacle_area_size
             for update in self._replayable_own_updates():
-                if size > 0 and areas.area_of(areas.rectangle_centre(update.rectangle), size) in request.areas:
-                    payload = codec.resolve_payload(
-                        codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
-                    if len(payload) <= self.config.max_payload_bytes:
-                        self._send(reply, payload, queue=False)
-                        self._count("resolves_sent")
+                if self._obstacle_area(update) in request.areas:
+                    self._resolve_obstacle(reply, update)
         if request.obstacles:
             for update in self._replayable_own_updates():
-                payload = codec.resolve_payload(
-                    codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
-                if len(payload) <= self.config.max_payload_bytes:
-                    self._send(reply, payload, queue=False)
-                    self._count("resolves_sent")
+                self._resolve_obstacle(reply, update)
             with self._lock:
                 current, as_of = self._current, self._current_as_of
             elapsed = self._clock() - as_of
@@ -1182,10 +1192,5 @@ class CoatyBridgeClient:
                 if update is None:
                     self._count("resolve_skipped_expired")
                     continue
-                payload = codec.resolve_payload(
-                    codec.obstacle_to_object(update, self.config.object_type, self.config.compact_indexes))
-                if len(payload) <= self.config.max_payload_bytes:
-                    self._send(reply, payload, queue=False)
-                    self._count("resolves_sent")
-                else:
+                if not self._resolve_obstacle(reply, update):
                     self._count("dropped_outgoing.oversized")

@@ -29,7 +29,6 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Tuple
 
-from coaty_bridge.areas import area_object_type, area_of, areas_around, is_scoped_object_type  # noqa: F401
 from coaty_bridge.errors import (InvalidNameError, MissingFieldError, NonFiniteNumberError,
                                  OutOfRangeError, WrongTypeError)
 from coaty_bridge.topics import _NAME_RE, _UUID_RE
@@ -177,11 +176,6 @@ def footprint_payload(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJECT
                       separators=(",", ":"), allow_nan=False).encode("utf-8")
 
 
-def is_footprint_object_type(candidate, object_type):
-    """True for ``object_type`` itself and for any ``<object_type>.area_<ix>_<iy>``."""
-    return is_scoped_object_type(candidate, object_type)
-
-
 @dataclass(frozen=True)
 class HeardRobot:
     """A robot's latest footprint and when this bridge heard it (its clock)."""
@@ -198,11 +192,6 @@ def extent(points):
 def centroid(points):
     """Mean of a footprint's vertices: where it is, for telling how far it moved."""
     return (sum(x for x, _ in points) / len(points), sum(y for _, y in points) / len(points))
-
-
-def moved(a, b):
-    """Distance (m) between two centroids."""
-    return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
 class FleetRobotTable:
