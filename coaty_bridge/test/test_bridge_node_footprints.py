@@ -151,7 +151,11 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
                                           ("advertise_footprint:=maybe", "advertise_footprint = 'maybe'"),
                                           ("footprint_min_move:=-0.1", "footprint_min_move = -0.1"),
                                           ("footprint_object_type:=coaty.F", "footprint_object_type = 'coaty.F'"),
-                                          ("footprint_area_size:=0.5", "footprint_area_size = 0.5")])
+                                          ("footprint_area_size:=0.5", "footprint_area_size = 0.5"),
+                                          ("footprint_parked_interval:=-1.0", "footprint_parked_interval = -1.0"),
+                                          ("footprint_parked_interval:=500.0", "footprint_parked_interval = 500.0"),
+                                          ("obstacle_area_size:=0.5", "obstacle_area_size = 0.5"),
+                                          ("peer_heartbeat_interval:=0.5", "peer_heartbeat_interval = 0.5")])
 def test_bad_footprint_parameters_fail_at_start_up(ros_graph, param, shown):
     node = ros_graph.bridge("robot_0", *param.split())
     out, _ = node.communicate(timeout=20)
