@@ -66,7 +66,7 @@ def main():
     to_fleet, lists, footprints = {}, {}, {}
     for robot in robots:
         rospy.Subscriber("/%s/fleet_robots" % robot, RobotFootprintArray, lambda msg, r=robot: emit(
-            {"event": "fleet_robots", "robot": r, "robots": [
+            {"event": "fleet_robots", "robot": r, "stamp": msg.header.stamp.to_sec(), "robots": [
                 {"robot": f.robot, "frame_id": f.header.frame_id, "stamp": f.header.stamp.to_sec(),
                  "points": [[p.x, p.y] for p in f.footprint.points]} for f in msg.robots]}))
         footprints[robot] = rospy.Publisher("/%s/move_base/global_costmap/footprint" % robot, PolygonStamped,

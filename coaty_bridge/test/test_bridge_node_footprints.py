@@ -145,6 +145,37 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
         assert node.poll() is None, "a bridge died"
 
 
+def test_a_parked_robot_stays_on_fleet_robots_between_its_adverts(ros_graph, broker, observer, wait_for):
+    """A parked robot advertises every footprint_parked_interval, beyond robot_timeout: its peer's list
+    must keep stamping it fresh while its validFor holds, or the peer's layer (which forgets a robot
+    robot_timeout after its stamp) forgets it between adverts and shares it as an obstacle."""
+    params = ["broker_url:=" + broker.url, "footprint_rate:=10.0", "robot_timeout:=1.0",
+              "footprint_parked_interval:=3.0"]
+    ros_graph.bridge("robot_0", *params)
+    ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
+    probe = ros_graph.probe("robot_0", "robot_1")
+    wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
+    probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY})
+
+    def parked_adverts():
+        probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": SQUARE, "stamp": 0.0})
+        return [a for a in robot_0_adverts(observer) if a[1]["object"].get("validFor")]
+    wait_for(parked_adverts, timeout=20, what="robot_0 parked: its first parked advert")
+    first, start = len(parked_adverts()), len(probe.events)
+    wait_for(lambda: len(parked_adverts()) > first, timeout=20, what="robot_0's next parked advert")
+    assert parked_adverts()[-1][1]["object"]["validFor"] == pytest.approx(fp.PARKED_VALIDITY * 3.0)
+    # Between two parked adverts (3 s apart, robot_timeout 1 s) robot_1 listed robot_0 in every list,
+    # each time stamped within robot_timeout of the list.
+    lists = [e for e in list(probe.events)[start:] if e.get("event") == "fleet_robots" and e["robot"] == "robot_1"]
+    assert len(lists) >= 5, "robot_1 published %d lists between two parked adverts" % len(lists)
+    for e in lists:
+        assert [r["robot"] for r in e["robots"]] == ["robot_0"], "robot_1 forgot parked robot_0: %s" % e
+        age = e["stamp"] - e["robots"][0]["stamp"]
+        assert age <= 1.0 + 1e-6, "robot_0 listed %.2f s old, beyond robot_timeout 1 s: a layer forgets it" % age
+    for node in ros_graph.nodes[:2]:
+        assert node.poll() is None, "a bridge died"
+
+
 @pytest.mark.parametrize("param, shown", [("footprint_rate:=0.0", "footprint_rate = 0.0"),
                                           ("robot_timeout:=-1.0", "robot_timeout = -1.0"),
                                           ("footprint_rate:=2.0 robot_timeout:=0.5", "robot_timeout = 0.5"),

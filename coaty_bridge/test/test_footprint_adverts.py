@@ -82,6 +82,21 @@ def test_the_table_keeps_a_parked_robot_for_its_validity_and_forgets_it_on_withd
     assert table.robots() == []
 
 
+def test_a_parked_robot_is_vouched_for_until_its_validity_runs_out_and_a_driving_one_from_when_heard():
+    """The stamp on fleet_robots, from which a layer's robot_timeout (3 s) counts: a parked robot's
+    adverts come every 10 s, so a stamp of when it was heard would let the layer forget it between them."""
+    timeout = 3.0
+    parked = fp.HeardRobot(fp.RobotFootprint("robot_1", 1.0, "map", SQUARE, valid_for=25.0), heard_at=100.0)
+    for now in (100.0, 105.0, 109.9, 121.0):
+        assert now - parked.vouched_at(now, timeout) <= timeout, "a layer forgets robot_1 at %g" % now
+    assert parked.vouched_at(125.0, timeout) == 122.0, "the layer keeps it to the end of validFor, not beyond"
+    assert parked.vouched_at(200.0, timeout) == 122.0
+    driving = fp.HeardRobot(fp.RobotFootprint("robot_2", 1.0, "map", SQUARE), heard_at=100.0)
+    assert driving.vouched_at(105.0, timeout) == 100.0
+    brief = fp.HeardRobot(fp.RobotFootprint("robot_3", 1.0, "map", SQUARE, valid_for=1.0), heard_at=100.0)
+    assert brief.vouched_at(105.0, timeout) == 100.0, "a validity below robot_timeout never backdates the stamp"
+
+
 @pytest.mark.parametrize("bad", [-1.0, fp.MAX_VALID_FOR + 1, float("nan"), float("inf"), "10", True])
 def test_a_bad_valid_for_is_refused_by_name(bad):
     obj = fp.footprint_to_object(fp.RobotFootprint("robot_1", 1.0, "map", SQUARE), str(uuidlib.uuid4()))

@@ -182,6 +182,16 @@ class HeardRobot:
     footprint: RobotFootprint
     heard_at: float
 
+    def vouched_at(self, now, timeout):
+        """The stamp a layer counts its ``robot_timeout`` from (RobotFootprint.msg): when it was heard,
+        or, for a parked robot's advert (``validFor``), as late as ``now`` while the advert holds, and
+        never later than ``timeout`` before it runs out. A parked robot advertises only every
+        footprint_parked_interval (10 s), far beyond a layer's 3 s robot_timeout: stamped with when it
+        was heard, the layer would forget it between adverts, and share it as an obstacle."""
+        if self.footprint.valid_for <= 0.0:
+            return self.heard_at
+        return max(self.heard_at, min(now, self.heard_at + self.footprint.valid_for - timeout))
+
 
 def extent(points):
     """(width, height) of a footprint's bounding box, m."""

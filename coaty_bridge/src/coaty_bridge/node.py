@@ -130,13 +130,14 @@ def polygon_to_footprint(msg, robot, now):
                           points=tuple((float(p.x), float(p.y)) for p in msg.polygon.points))
 
 
-def fleet_robots_message(heard, now):
-    """The known fleet robots as a RobotFootprintArray; each robot's stamp is when it was heard."""
+def fleet_robots_message(heard, now, timeout):
+    """The known fleet robots as a RobotFootprintArray; each robot's stamp is when it was heard, kept
+    fresh for a parked robot's validFor (HeardRobot.vouched_at, ``timeout`` the robot_timeout)."""
     array = RobotFootprintArray()
     array.header.stamp = rospy.Time.from_sec(now)
     for item in heard:
         robot = RobotFootprint()
-        robot.header.stamp = rospy.Time.from_sec(max(0.0, item.heard_at))
+        robot.header.stamp = rospy.Time.from_sec(max(0.0, item.vouched_at(now, timeout)))
         robot.header.frame_id = item.footprint.frame_id
         robot.robot = item.footprint.robot
         robot.footprint.points = [Point32(x, y, 0.0) for x, y in item.footprint.points]
@@ -317,14 +318,16 @@ class BridgeNode:
                               self.config.robot_name, footprint.robot, topic.source_id)
             if footprint.robot != self.config.robot_name:
                 # At once, not at the next tick: a driving robot's footprint a tick old has moved on.
-                self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time()))
+                self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time(),
+                                                            self.footprint_config.robot_timeout))
 
     def _on_fleet_footprint_withdrawn(self, robot, topic):
         """MQTT thread: a peer took its footprint back (stopped, or its navigation went quiet)."""
         if self.fleet.forget(robot):
             rospy.loginfo("%s: fleet robot %s withdrew its footprint (sourceId %s)", self.config.robot_name, robot,
                           topic.source_id)
-            self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time()))
+            self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time(),
+                                                            self.footprint_config.robot_timeout))
 
     def _footprint_tick(self, _event=None):
         """At footprint_rate: advertise this robot's footprint while it is fresh, forget silent fleet
@@ -354,7 +357,7 @@ class BridgeNode:
             self._count("fleet_robots_forgotten")
             rospy.loginfo("%s: fleet robot %s forgotten: not heard for robot_timeout %.1f s",
                           self.config.robot_name, name, self.footprint_config.robot_timeout)
-        self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), now))
+        self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), now, self.footprint_config.robot_timeout))
 
     def _on_to_fleet(self, msg):
         try:
