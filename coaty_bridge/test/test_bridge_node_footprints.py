@@ -19,7 +19,7 @@ AWAY = [[x + 8.0, y] for x, y in SQUARE]   # robot_1's own footprint: the next 1
 def robot_0_adverts(observer):
     """Footprint adverts robot_0's bridge sent (the test's own bad ones left out)."""
     return [a for a in observer.on("ADV::" + OT)
-            if isinstance(a[1], dict) and a[1].get("object", {}).get("name") == "RobotFootprint robot_0"]
+            if isinstance(a[1], dict) and a[1].get("object", {}).get("robot") == "robot_0"]
 
 
 def latest_fleet(probe, robot):

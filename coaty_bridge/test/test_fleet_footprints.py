@@ -34,7 +34,7 @@ def test_object_round_trip_and_shape():
     object_id = str(uuidlib.uuid4())
     obj = fp.footprint_to_object(value, object_id)
     assert obj == {"objectType": OT, "coreType": "CoatyObject", "objectId": object_id,
-                   "name": "RobotFootprint robot_1", "robot": "robot_1", "stamp": 1700000000.5,
+                   "name": "robot_1", "robot": "robot_1", "stamp": 1700000000.5,
                    "frameId": "map", "footprint": [list(p) for p in SQUARE]}
     assert fp.footprint_from_object(json.loads(json.dumps(obj))) == value
     payload = json.loads(fp.footprint_payload(value, object_id))

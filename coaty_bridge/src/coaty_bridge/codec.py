@@ -5,7 +5,7 @@ one object per obstacle: objectId is the obstacle uuid, every update of the
 obstacle re-advertises it with a higher version)::
 
     {"objectType": "org.fleetsharing.SharedObstacle", "coreType": "CoatyObject",
-     "objectId": <uuid>, "name": "SharedObstacle <first 8 of uuid>",
+     "objectId": <uuid>, "name": "<first 8 of uuid>",
      "uuid": <uuid>, "source": "robot_0", "version": 3, "stamp": 1700000000.25,
      "frameId": "map", "deadline": 60, "rectangle": [min_x, min_y, max_x, max_y],
      "resolution": 0.05, "origin": [x, y], "size": [size_x, size_y],
@@ -261,7 +261,7 @@ def obstacle_to_object(update, object_type=DEFAULT_OBJECT_TYPE, compact_indexes=
         "objectType": object_type,
         "coreType": "CoatyObject",
         "objectId": update.uuid,
-        "name": "SharedObstacle %s" % update.uuid[:8],   # for people reading the traffic; the uuid is in objectId
+        "name": update.uuid[:8],   # Coaty requires a name; objectType says what it is, objectId is the uuid
         "uuid": update.uuid,
         "source": update.source,
         "version": update.version,

@@ -6,7 +6,7 @@ its own objectType (default ``org.fleetsharing.RobotFootprint``) on
 ``coaty/3/<ns>/ADV::<objectType>/<sourceId>``, at ``footprint_rate`` (2 Hz)::
 
     {"objectType": "org.fleetsharing.RobotFootprint", "coreType": "CoatyObject",
-     "objectId": <uuid of this advert series>, "name": "RobotFootprint robot_0",
+     "objectId": <uuid of this advert series>, "name": "robot_0",
      "robot": "robot_0", "stamp": 1700000000.25, "frameId": "map",
      "footprint": [[x, y], [x, y], ...]}
 
@@ -125,7 +125,7 @@ def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJE
         "objectType": object_type,
         "coreType": "CoatyObject",
         "objectId": object_id,
-        "name": "RobotFootprint %s" % footprint.robot,
+        "name": footprint.robot,   # Coaty requires a name; objectType says what it is
         "robot": footprint.robot,
         "stamp": footprint.stamp,
         "frameId": footprint.frame_id,
@@ -186,7 +186,7 @@ class HeardRobot:
         """The stamp a layer counts its ``robot_timeout`` from (RobotFootprint.msg): when it was heard,
         or, for a parked robot's advert (``validFor``), as late as ``now`` while the advert holds, and
         never later than ``timeout`` before it runs out. A parked robot advertises only every
-        footprint_parked_interval (10 s), far beyond a layer's 3 s robot_timeout: stamped with when it
+        footprint_parked_interval (30 s), far beyond a layer's 3 s robot_timeout: stamped with when it
         was heard, the layer would forget it between adverts, and share it as an obstacle."""
         if self.footprint.valid_for <= 0.0:
             return self.heard_at

@@ -91,7 +91,7 @@ class FootprintConfig:
     """The node's footprint parameters (fleet robots are never shared); ValueError names a bad one."""
 
     def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True,
-                 min_move=0.1, parked_interval=10.0):
+                 min_move=0.1, parked_interval=30.0):
         if not isinstance(topic, str) or not topic:
             raise ValueError("parameter footprint_topic = %r: must be a topic name" % (topic,))
         for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0),
@@ -119,7 +119,7 @@ class FootprintConfig:
                    robot_timeout=rospy.get_param("~robot_timeout", 3.0),
                    advertise=rospy.get_param("~advertise_footprint", True),
                    min_move=rospy.get_param("~footprint_min_move", 0.1),
-                   parked_interval=rospy.get_param("~footprint_parked_interval", 10.0))
+                   parked_interval=rospy.get_param("~footprint_parked_interval", 30.0))
 
 
 def polygon_to_footprint(msg, robot, now):
