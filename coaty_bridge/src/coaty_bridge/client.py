@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import paho.mqtt.client as mqtt
 
-from coaty_bridge import areas, codec, footprint as footprints, lifetimes
+from coaty_bridge import areas, codec, footprint as footprints, lifetimes, renewals
 from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, OutOfRangeError,
                                  UnknownRobotError, WrongTypeError)
 from coaty_bridge import liveness as liveness_rules
@@ -311,6 +311,12 @@ _MAX_DISCOVER_REQUESTERS = 4096
 # obstacles whose fleet-wide expiry is kept before expired entries are swept (a flood cannot grow it for long)
 _MAX_FLEET_EXPIRIES = 400000
 
+
+def _renewal_margin(deadline):
+    """s before the far copies of an obstacle with ``deadline`` s left expire that its renewal is due."""
+    return max(2.0, 0.1 * deadline)
+
+
 #: Own updates kept per obstacle for Discover answers (the oldest go first beyond this).
 OWN_LOG_PER_OBSTACLE = 200
 #: s after start() without a connection (and no failed attempt yet) before the first WARN.
@@ -382,12 +388,14 @@ class CoatyBridgeClient:
         self._obstacle_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.object_type))
         self._footprint_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.footprint_object_type))
         self._dad_topic = str(Topic(ns, "DAD", self.identity_id))
+        self._renewals_topic = str(Topic(ns, "CHN", self.identity_id, filter=renewals.CHANNEL))
         self._subscriptions = [
             (subscription(ns, "ADV::" + config.object_type), qos),
             (subscription(ns, "ADV::" + config.footprint_object_type), qos),
             (subscription(ns, "DSC", two_way=True), qos),
             (subscription(ns, "RSV", two_way=True), qos),
             (subscription(ns, "CHN:" + HEARTBEAT_CHANNEL), qos),
+            (subscription(ns, "CHN:" + renewals.CHANNEL), qos),
             (subscription(ns, "DAD"), qos),
             (self._echo_topic, qos),
         ]
@@ -668,8 +676,7 @@ class CoatyBridgeClient:
         with self._lock:
             far = self._fleet_expiry.get(update.uuid, -math.inf)
             if now + update.deadline > far:
-                margin = max(2.0, 0.1 * update.deadline)
-                self._renewals[update.uuid] = (max(now, far - margin), update, now)
+                self._renewals[update.uuid] = (max(now, far - _renewal_margin(update.deadline)), update, now)
 
     def _sent_fleet_wide(self, update, now=None):
         """Every robot got ``update`` (sent or heard on the fleet-wide objectType): their copies live
@@ -687,24 +694,46 @@ class CoatyBridgeClient:
                     del self._fleet_expiry[uuid]
 
     def renew_due(self):
-        """Sends, fleet-wide, the renewals that are due (the broker watch calls it every second); returns
-        how many went out. A renewal is this robot's last area-scoped update of the obstacle, aged."""
+        """Sends, fleet-wide, the renewals that are due (the broker watch calls it every second), and
+        with them those due within their margin, in as few renewals events as their source, frame and
+        grid allow (``renewals``); returns how many obstacles were renewed. A renewal is this robot's
+        last area-scoped update of the obstacle, aged. Offline, they wait (and are aged when sent)."""
         now = self._clock()
         with self._lock:
-            due = [(u, r) for u, r in self._renewals.items() if r[0] <= now]
-            for uuid, _r in due:
+            if not self._connected:
+                return 0
+            due = {u: r for u, r in self._renewals.items() if r[0] <= now}
+            if due:
+                # renewing a little early costs nothing, a second event costs its bytes again
+                due.update({u: r for u, r in self._renewals.items()
+                            if r[0] - _renewal_margin(r[1].deadline) <= now})
+            for uuid in due:
                 del self._renewals[uuid]
-        sent = 0
-        for uuid, (_due, update, sent_at) in due:
+        fresh_updates = []
+        for uuid, (_due, update, sent_at) in due.items():
             fresh = lifetimes.aged(update, now - sent_at)
             with self._lock:
                 covered = self._fleet_expiry.get(uuid, -math.inf) >= sent_at + update.deadline - 1.0
-            if fresh is None or covered:
+            if fresh is not None and not covered:
+                fresh_updates.append(fresh)
+        sent = 0
+        for chunk, obj in renewals.renewals_objects(fresh_updates, new_uuid):
+            payload = renewals.renewals_payload(obj)
+            with self._lock:
+                published = self._connected and self._mqtt.publish(
+                    self._renewals_topic, payload, qos=self._qos).rc == mqtt.MQTT_ERR_SUCCESS
+                if not published:
+                    # not lost: due again at the next watch tick, aged from now
+                    for update in chunk:
+                        self._renewals.setdefault(update.uuid, (now, update, now))
+            if not published:
                 continue
-            self._sent_fleet_wide(fresh, now)
-            self._send(self._obstacle_topic, self._obstacle_payload(fresh), update=fresh)
-            self._count("renewals_sent")
-            sent += 1
+            for update in chunk:
+                self._sent_fleet_wide(update, now)
+            self._count("renewals_sent", len(chunk))
+            self._count("renewal_events_sent")
+            self._count("bytes_published", len(payload))
+            sent += len(chunk)
         return sent
 
     def publish_footprint(self, footprint):
@@ -1041,6 +1070,14 @@ class CoatyBridgeClient:
                         if len(self._footprint_senders) < 4096 or topic.source_id in self._footprint_senders:
                             self._footprint_senders[topic.source_id] = (footprint.robot,
                                                                         data["object"]["objectId"].lower())
+            elif topic.event == "CHN" and topic.filter == renewals.CHANNEL:
+                content = renewals.decode_renewals(data, self.config.object_type, self.config.limits)
+                for err in content.errors:
+                    self._drop(err, topic_text, payload)
+                self._count("renewals_received", len(content.obstacles))
+                for update in content.obstacles:
+                    self._sent_fleet_wide(update)
+                    self._deliver(update, topic)
             elif topic.event == "DAD":
                 self._on_deadvertise(topic, codec.decode_deadvertise(data))
             elif topic.event == "DSC":
