@@ -4,17 +4,20 @@
 //   {"cmd": "discoverIdentities"}       -> {"event": "identity", "object": ...} per Resolve
 //   {"cmd": "publish", "object": {...}} -> Advertise; the object also answers obstacle Discovers
 //   {"cmd": "publishFootprint", "object": {...}} -> Advertise of a robot footprint (not a Discover answer)
+//   {"cmd": "publishRenewals", "object": {...}} -> Channel event on org.fleetsharing.ObstacleRenewals
 //   {"cmd": "exit"}
 // Events: ready, advertise (objects of <objectType>, with compact index strings decoded),
-// deadvertise, discoverAnswered, footprint (objects of <footprintObjectType>), error.
+// deadvertise, discoverAnswered, footprint (objects of <footprintObjectType>), renewals (the objects of
+// Channel events on org.fleetsharing.ObstacleRenewals, with the sender's sourceId), error.
 "use strict";
 const readline = require("readline");
 const zlib = require("zlib");
-const { Container, MqttBinding, AdvertiseEvent, DiscoverEvent, ResolveEvent } = require("@coaty/core");
+const { Container, MqttBinding, AdvertiseEvent, ChannelEvent, DiscoverEvent, ResolveEvent } = require("@coaty/core");
 
 const [brokerUrl, namespace, objectType, footprintType] = process.argv.slice(2);
 const emit = (event) => process.stdout.write(JSON.stringify(event) + "\n");
 const mine = [];
+const RENEWALS_CHANNEL = "org.fleetsharing.ObstacleRenewals";
 
 // The bridge's compact index form: base64 of LEB128 varints, first value then gaps;
 // with a "z:" prefix the varint bytes are raw-deflated.
@@ -49,6 +52,9 @@ const container = Container.resolve({}, {
 });
 const com = container.communicationManager;
 
+// first: a test that has seen an Advertise knows this subscription is in place too
+com.observeChannel(RENEWALS_CHANNEL).subscribe(
+    event => emit({ event: "renewals", object: event.data.object, sourceId: event.sourceId }));
 com.observeAdvertiseWithObjectType(objectType).subscribe(event => {
     const object = event.data.object;
     emit({
@@ -85,6 +91,9 @@ lines.on("line", line => {
             emit({ event: "published", objectId: cmd.object.objectId });
         } else if (cmd.cmd === "publishFootprint") {
             com.publishAdvertise(AdvertiseEvent.withObject(cmd.object));
+            emit({ event: "published", objectId: cmd.object.objectId });
+        } else if (cmd.cmd === "publishRenewals") {
+            com.publishChannel(ChannelEvent.withObject(RENEWALS_CHANNEL, cmd.object));
             emit({ event: "published", objectId: cmd.object.objectId });
         } else if (cmd.cmd === "exit") {
             container.shutdown();

@@ -168,3 +168,67 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
         finally:
             peer.send({"cmd": "exit"}) if peer.proc.poll() is None else None
             peer.stop()
+
+
+def test_renewals_events_pass_between_a_bridge_and_coaty_js(coaty_js, json_lines_process, make_update):
+    """A bridge's renewals event (issue 29) is a Channel event Coaty JS takes as valid and reads whole,
+    and one a JS program writes (integers for floats, plain index arrays) renews at a bridge."""
+    from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+    with Broker() as broker:
+        peer = json_lines_process(
+            "coaty_js_peer", ["node", os.path.join(HERE, "coaty_js_peer.js"), broker.url, "fleet", OT],
+            env=dict(os.environ, NODE_PATH=os.path.join(coaty_js, "node_modules")), cwd=coaty_js)
+        now = [1000.0]
+        source = CoatyBridgeClient(BridgeConfig("robot_0", broker_url=broker.url), lambda u, t: None,
+                                   clock=lambda: now[0])
+        got = []
+        receiver = CoatyBridgeClient(BridgeConfig("robot_1", broker_url=broker.url), lambda u, t: got.append(u))
+        try:
+            source.start()
+            receiver.start()
+            peer.expect(lambda e: e.get("event") == "ready", what="Coaty JS agent online")
+            deadline = time.monotonic() + 10
+            while not (source.connected and receiver.connected) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            source.note_own_position((5.0, 5.0))
+            first = make_update(version=1, deadline=100)
+            # shared until the peer has it: then its subscriptions are in place (the renewals channel is
+            # observed before the Advertise); 'ready' comes before they are
+            for _ in range(30):
+                assert source.publish_obstacle(first)
+                try:
+                    peer.expect(lambda e: e.get("event") == "advertise" and e["object"]["objectId"] == first.uuid,
+                                timeout=1.0, what="the first share at Coaty JS")
+                    break
+                except AssertionError:
+                    continue
+            now[0] = 1010.0
+            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(2001500,), cleared=(),
+                                                       deadline=100))
+            now[0] = 1090.0
+            assert source.renew_due() == 1
+            seen = peer.expect(lambda e: e.get("event") == "renewals", what="the renewals event at Coaty JS")
+            obj = seen["object"]
+            assert seen["sourceId"] == source.identity_id and obj["coreType"] == "CoatyObject"
+            assert obj["source"] == "robot_0" and obj["size"] == [2000, 2000]
+            assert [(e[0], e[1], e[3]) for e in obj["obstacles"]] == [(first.uuid, 2, 20)]
+
+            # written as a JS program would: 1 for 1.0, plain arrays of indexes
+            theirs = str(uuidlib.uuid4())
+            peer.send({"cmd": "publishRenewals", "object": {
+                "objectType": "org.fleetsharing.ObstacleRenewals", "coreType": "CoatyObject",
+                "objectId": str(uuidlib.uuid4()), "name": "js_peer", "source": "js_peer", "frameId": "map",
+                "resolution": 1, "origin": [0, -5], "size": [20, 10],
+                "obstacles": [[theirs, 3, 1700000200, 30, [0, 0, 1, 1], [3, 4], []]]}})
+            deadline = time.monotonic() + 10
+            while not [u for u in got if u.uuid == theirs] and time.monotonic() < deadline:
+                time.sleep(0.05)
+            renewed = [u for u in got if u.uuid == theirs]
+            assert renewed, "the JS renewal never reached robot_1: %s" % receiver.counters()
+            assert (renewed[0].version, renewed[0].deadline, renewed[0].marked) == (3, 30, (3, 4))
+            assert renewed[0].resolution == 1.0 and renewed[0].origin_y == -5.0
+        finally:
+            source.stop(timeout=0.5)
+            receiver.stop(timeout=0.5)
+            peer.send({"cmd": "exit"}) if peer.proc.poll() is None else None
+            peer.stop()
