@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <cstddef>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -21,24 +22,32 @@ inline int signOf(int x)
  * Steps along the dominant axis "a"; the action is applied to min(max_length, abs_da)
  * cells and then once more to the cell reached, so the endpoint is included when the
  * line is not cut short by max_length.
+ *
+ * The action is taken by value, as costmap_2d takes it, and keeps its state behind pointers. The cell offset is
+ * walked in 64 bits: a 32-bit offset is zero-extended again before every write (a quarter more instructions per
+ * cell than costmap_2d's loop at -O2); an offset inside the grid is the same number either way.
  */
 template <class Action>
-inline void bresenham2D(Action& at, unsigned int abs_da, unsigned int abs_db, int error_b, int offset_a,
+inline void bresenham2D(Action at, unsigned int abs_da, unsigned int abs_db, int error_b, int offset_a,
                         int offset_b, std::uint32_t offset, unsigned int max_length)
 {
   const unsigned int end = std::min(max_length, abs_da);
+  std::size_t cell = offset;
+  // (a negative step, sign-extended, wraps to the right cell: unsigned arithmetic is modulo 2^64)
+  const std::size_t step_a = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(offset_a));
+  const std::size_t step_b = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(offset_b));
   for (unsigned int i = 0; i < end; ++i)
   {
-    at(offset);
-    offset += offset_a;
+    at(cell);
+    cell += step_a;
     error_b += abs_db;
     if (static_cast<unsigned int>(error_b) >= abs_da)
     {
-      offset += offset_b;
+      cell += step_b;
       error_b -= abs_da;
     }
   }
-  at(offset);
+  at(cell);
 }
 
 /**
@@ -102,7 +111,7 @@ inline LineSteps lineSteps(unsigned int x0, unsigned int y0, unsigned int x1, un
  * Both ends must lie inside a grid of width size_x.
  */
 template <class Action>
-inline void raytraceLine(Action& at, unsigned int x0, unsigned int y0, unsigned int x1, unsigned int y1,
+inline void raytraceLine(Action at, unsigned int x0, unsigned int y0, unsigned int x1, unsigned int y1,
                          unsigned int size_x, unsigned int max_length = UINT_MAX)
 {
   const LineSteps line = lineSteps(x0, y0, x1, y1, max_length);
@@ -131,7 +140,7 @@ struct SetCellAction
 {
   std::uint8_t* costs;
   std::uint8_t value;
-  inline void operator()(std::uint32_t offset) { costs[offset] = value; }
+  inline void operator()(std::size_t offset) { costs[offset] = value; }
 };
 
 /// @brief Action that writes a value and records which cells it visited.
