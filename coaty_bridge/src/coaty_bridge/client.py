@@ -1071,24 +1071,19 @@ class CoatyBridgeClient:
                             self._footprint_senders[topic.source_id] = (footprint.robot,
                                                                         data["object"]["objectId"].lower())
             elif topic.event == "CHN" and topic.filter == renewals.CHANNEL:
-                content = renewals.decode_renewals(data, self.config.object_type, self.config.limits)
-                for err in content.errors:
-                    self._drop(err, topic_text, payload)
-                self._count("renewals_received", len(content.obstacles))
-                for update in content.obstacles:
+                batch = renewals.decode_renewals(data, self.config.object_type, self.config.limits)
+                self._count("renewals_received", len(batch.obstacles))
+                for update in batch.obstacles:
                     self._sent_fleet_wide(update)
-                    self._deliver(update, topic)
+                self._deliver_batch(batch, topic, topic_text, payload)
             elif topic.event == "DAD":
                 self._on_deadvertise(topic, codec.decode_deadvertise(data))
             elif topic.event == "DSC":
                 self._answer_discover(topic, codec.decode_discover(data, self.identity_id,
                                                                    self.config.object_type))
             elif topic.event == "RSV":
-                content = codec.decode_resolve(data, self.config.object_type, self.config.limits)
-                for err in content.errors:
-                    self._drop(err, topic_text, payload)
-                for update in content.obstacles:
-                    self._deliver(update, topic)
+                self._deliver_batch(codec.decode_resolve(data, self.config.object_type, self.config.limits),
+                                    topic, topic_text, payload)
             else:
                 self._count("ignored")
         except CoatyError as err:
@@ -1104,6 +1099,13 @@ class CoatyBridgeClient:
         excerpt = bytes(payload[:80]) if isinstance(payload, (bytes, bytearray)) else str(payload)[:80]
         LOG.warning("%s: dropped %s on %r: %s; payload %r", self.config.robot_name, err.reason,
                     str(topic_text)[:120], err, excerpt)
+
+    def _deliver_batch(self, batch, topic, topic_text, payload):
+        """A codec.ObstacleBatch: its bad objects dropped (each counted and logged), its good ones delivered."""
+        for err in batch.errors:
+            self._drop(err, topic_text, payload)
+        for update in batch.obstacles:
+            self._deliver(update, topic)
 
     def _deliver(self, update, topic):
         if self.config.authenticate_sources:

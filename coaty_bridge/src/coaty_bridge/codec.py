@@ -414,14 +414,24 @@ def decode_discover(data, identity_id, object_type):
 
 
 @dataclass(frozen=True)
-class ResolveContent:
-    """The obstacles found in a Resolve, and the errors of the objects that were bad."""
+class ObstacleBatch:
+    """The obstacles found in an event that carries several (a Resolve, a renewals event), and the errors of
+    the objects that were bad."""
     obstacles: Tuple[ObstacleUpdate, ...]
     errors: Tuple[CoatyError, ...] = field(default=())
 
 
+def collect_obstacle(obj, object_type, limits, found, errors):
+    """Decodes one obstacle object of several into ``found``, or its error into ``errors``: a bad one
+    loses none of the good ones."""
+    try:
+        found.append(obstacle_from_object(obj, object_type, limits))
+    except (CoatyError, ValueError) as err:
+        errors.append(err if isinstance(err, CoatyError) else InvalidPayloadError(str(err)))
+
+
 def decode_resolve(data, object_type, limits=CodecLimits()):
-    """Resolve payload dict -> ResolveContent. Objects of other types are ignored;
+    """Resolve payload dict -> ObstacleBatch. Objects of other types are ignored;
     each bad obstacle object is reported in ``errors`` without losing the good ones."""
     objects = []
     if "object" in data:
@@ -442,11 +452,8 @@ def decode_resolve(data, object_type, limits=CodecLimits()):
             continue
         if obj.get("objectType") != object_type:
             continue
-        try:
-            found.append(obstacle_from_object(obj, object_type, limits))
-        except (CoatyError, ValueError) as err:
-            errors.append(err if isinstance(err, CoatyError) else InvalidPayloadError(str(err)))
-    return ResolveContent(tuple(found), tuple(errors))
+        collect_obstacle(obj, object_type, limits, found, errors)
+    return ObstacleBatch(tuple(found), tuple(errors))
 
 
 def decode_advertise(data, object_type, limits=CodecLimits()):

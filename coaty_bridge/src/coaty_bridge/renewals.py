@@ -19,24 +19,14 @@ Each entry means exactly the obstacle object with those fields plus the shared o
 ``codec.obstacle_from_object``, the one check of an obstacle: a bad entry is reported alone and
 the good ones are kept.
 """
-from dataclasses import dataclass, field
-from typing import Tuple
-
 from coaty_bridge import codec, compact
-from coaty_bridge.errors import CoatyError, InvalidPayloadError, OutOfRangeError, WrongTypeError
+from coaty_bridge.errors import OutOfRangeError, WrongTypeError
 
 CHANNEL = "org.fleetsharing.ObstacleRenewals"
 OBJECT_TYPE = "org.fleetsharing.ObstacleRenewals"
 #: entries in one event at most, sent and received (a bridge renews its own updates: a handful)
 MAX_ENTRIES = 64
 _SHARED = ("source", "frameId", "resolution", "origin", "size")
-
-
-@dataclass(frozen=True)
-class RenewalsContent:
-    """The obstacles of one renewals event, and the errors of its bad entries."""
-    obstacles: Tuple[codec.ObstacleUpdate, ...]
-    errors: Tuple[CoatyError, ...] = field(default=())
 
 
 def _shared_fields(update):
@@ -70,7 +60,7 @@ def renewals_payload(obj):
 
 
 def decode_renewals(data, object_type, limits=codec.CodecLimits()):
-    """Channel payload dict -> RenewalsContent of obstacles of ``object_type`` (the fleet's plain
+    """Channel payload dict -> codec.ObstacleBatch of obstacles of ``object_type`` (the fleet's plain
     obstacle objectType). Raises a CoatyError when the event itself is bad; a bad entry is reported
     in ``errors`` without losing the others."""
     obj = codec._get(data, "object")
@@ -96,8 +86,5 @@ def decode_renewals(data, object_type, limits=codec.CodecLimits()):
         full = dict(shared, objectType=object_type, coreType="CoatyObject", objectId=uuid, name="", uuid=uuid,
                     version=version, stamp=stamp, deadline=deadline, rectangle=rectangle,
                     markedIndexes=marked, clearedIndexes=cleared)
-        try:
-            found.append(codec.obstacle_from_object(full, object_type, limits))
-        except (CoatyError, ValueError) as err:
-            errors.append(err if isinstance(err, CoatyError) else InvalidPayloadError(str(err)))
-    return RenewalsContent(tuple(found), tuple(errors))
+        codec.collect_obstacle(full, object_type, limits, found, errors)
+    return codec.ObstacleBatch(tuple(found), tuple(errors))
