@@ -223,6 +223,27 @@ def test_peers_are_judged_by_the_interval_they_announce():
     assert "robot_1 silent" not in reason
 
 
+def test_a_peer_is_alive_while_heard_within_its_timeout_and_not_after_its_last_will():
+    now = [0.0]
+    lv = liveness.Liveness("robot_0", lambda: now[0], timeout=3.0, heartbeat_interval=1.0)
+    assert not lv.alive("robot_1")                     # never heard
+    lv.departed("robot_1")                             # a will of a robot never heard changes nothing
+    lv.peer("robot_1", 10.0)
+    assert lv.alive("robot_1")
+    now[0] = 30.0                                      # 3 announced intervals: still alive
+    assert lv.alive("robot_1")
+    now[0] = 30.5
+    assert not lv.alive("robot_1")
+    lv.peer("robot_1", 10.0)
+    lv.departed("robot_1")                             # the broker lost it
+    assert not lv.alive("robot_1")
+    assert "robot_1" not in lv.status()[1]             # the partition verdict still follows its heartbeats
+    lv.peer("robot_1", 10.0)                           # back
+    assert lv.alive("robot_1")
+    lv.forget("robot_1")                               # a leaving heartbeat
+    assert not lv.alive("robot_1") and not lv.alive("robot_0")
+
+
 def test_the_automatic_peer_interval_grows_with_the_peers_known():
     now = [0.0]
     lv = liveness.Liveness("robot_0", lambda: now[0], timeout=3.0, heartbeat_interval=1.0, rng=random.Random(3))

@@ -92,6 +92,11 @@ class BridgeConfig:
     # one 52-byte Discover costs every bridge one Resolve per obstacle held (issue 27, attack 4)
     discover_answer_rate: float = 1.0
     discover_answer_burst: int = 3
+    # who answers an obstacle Discover with another robot's obstacle: "creator" (the robot that
+    # created it, while it is a live peer; every robot once it is gone) or "everyone" holding it. Each
+    # robot always replays its own updates. "everyone" costs a joining robot one Resolve per obstacle
+    # per robot in the fleet.
+    discover_answers: str = "creator"
     # Per sender (MQTT sourceId; issue 27, item 3): obstacle Advertises beyond a token bucket of this
     # many per s with this burst are dropped before their payload is parsed, and what is left waits
     # in a queue per sender (at most source_queue_size), served round-robin, so one sender's flood
@@ -194,6 +199,8 @@ class BridgeConfig:
         if isinstance(self.discover_answer_burst, bool) or not isinstance(self.discover_answer_burst, int) \
                 or not 1 <= self.discover_answer_burst <= 1000:
             fail("discover_answer_burst", "must be an integer 1..1000")
+        if self.discover_answers not in ("creator", "everyone"):
+            fail("discover_answers", "must be \"creator\" or \"everyone\", not %r" % (self.discover_answers,))
         rate = self.source_message_rate
         if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate < 1e9:
             fail("source_message_rate", "must be a positive number of messages per second")
@@ -397,6 +404,8 @@ class CoatyBridgeClient:
             (subscription(ns, "CHN:" + HEARTBEAT_CHANNEL), qos),
             (subscription(ns, "CHN:" + renewals.CHANNEL), qos),
             (subscription(ns, "DAD"), qos),
+            # agents' Identity adverts (one per connection): which robot a Discover comes from
+            (subscription(ns, "ADV:" + codec.IDENTITY_CORE_TYPE), qos),
             (self._echo_topic, qos),
         ]
         # Footprint and obstacle areas heard now (the 3 x 3 around the own robot, each at its own size);
@@ -1076,6 +1085,8 @@ class CoatyBridgeClient:
                 for update in batch.obstacles:
                     self._sent_fleet_wide(update)
                 self._deliver_batch(batch, topic, topic_text, payload)
+            elif topic.event == "ADV" and topic.core_type == codec.IDENTITY_CORE_TYPE:
+                self._on_identity(topic, data)
             elif topic.event == "DAD":
                 self._on_deadvertise(topic, codec.decode_deadvertise(data))
             elif topic.event == "DSC":
@@ -1161,12 +1172,37 @@ class CoatyBridgeClient:
                       footprint.robot, type(err).__name__, err)
         return True
 
+    def _on_identity(self, topic, data):
+        """An agent's Identity advert: its name, so that a Discover from it says which robot asks. Under
+        authenticate_sources a name is taken only from the sourceId derived from it (a Coaty JS agent's
+        own name is not a robot's)."""
+        obj = data.get("object") if isinstance(data, dict) else None
+        name = obj.get("name") if isinstance(obj, dict) else None
+        if not isinstance(name, str):
+            raise WrongTypeError("Identity advert without a name string")
+        check_name(name, "Identity name")
+        if self.config.authenticate_sources and topic.source_id != identity_for(self.config.namespace, name):
+            self._count("ignored")
+            return
+        if len(self._robot_of) < 4096 or topic.source_id in self._robot_of:
+            self._robot_of[topic.source_id] = name
+
     def _on_deadvertise(self, topic, object_ids):
-        """A Deadvertise: when it names a footprint sender's agent or advert series, that robot is gone."""
+        """A Deadvertise: when it names a footprint sender's agent or advert series, that robot is gone.
+        When it names a known agent (a clean stop, or the last will of a robot the broker lost), that
+        robot is not counted on to answer Discovers for the obstacles it created, and the agent is
+        forgotten (a robot reconnecting advertises its Identity again)."""
+        peer = None
+        if topic.source_id in object_ids and topic.source_id != self.identity_id:
+            peer = self._robot_of.pop(topic.source_id, None)
+        if peer is not None:
+            self.liveness.departed(peer)
+            self._count("peers_departed")
         with self._lock:
             known = self._footprint_senders.get(topic.source_id)
             if known is None or not ({topic.source_id, known[1]} & set(object_ids)):
-                self._counters["ignored"] += 1
+                if peer is None:
+                    self._counters["ignored"] += 1
                 return
             del self._footprint_senders[topic.source_id]
         self._count("footprints_withdrawn")
@@ -1197,6 +1233,20 @@ class CoatyBridgeClient:
         self._count("resolves_sent")
         return True
 
+    def _left_to_creator(self, creator, requester):
+        """True when another robot's obstacle is answered by its creator alone (``discover_answers``
+        "creator"): the creator is a live peer and is not the one asking (a robot's Identity advert, which
+        it sends before its Discover, names it). Otherwise every robot holding it answers, as when its
+        creator is gone: the fleet's copies are all that is left. Under authenticate_sources only the
+        creator ever answers: receivers accept an obstacle only from the robot its source names."""
+        if self.config.discover_answers != "creator" or creator == self.config.robot_name:
+            return False
+        if self.config.authenticate_sources:
+            return True    # a copy relayed under our sourceId is dropped as forged by every authenticating robot
+        if self._robot_of.get(requester) == creator:
+            return False   # the creator itself asks: it restarted, and the fleet's copies are all it has
+        return self.liveness.alive(creator)
+
     def _discover_allowed(self, requester):
         """True when a Discover from `requester` may be answered now (its own token bucket; the
         longest-quiet requesters, whose buckets are full again, are forgotten first)."""
@@ -1225,6 +1275,9 @@ class CoatyBridgeClient:
                 current, as_of = self._current, self._current_as_of
             elapsed = self._clock() - as_of
             for update in current:
+                if self._left_to_creator(update.source, topic.source_id):
+                    self._count("resolves_left_to_creator")
+                    continue
                 # the list's deadlines were valid at as_of: age them to now (a copy made from
                 # a Resolve must not outlive the original)
                 update = lifetimes.aged(update, elapsed)

@@ -127,6 +127,8 @@ class Liveness:
         self._interval = None      # the interval announced in the last one
         # robot -> (time heard, announced interval, misses us, heard count)
         self._peers = {}
+        # robot -> time the broker withdrew its identity (its last will) after it was last heard
+        self._departed = {}
         self._expected = set(r for r in known_robots if r != robot)
 
     # ----------------------------------------------------------- sending
@@ -195,12 +197,29 @@ class Liveness:
             if robot not in self._peers and len(self._peers) >= MAX_PEERS:
                 return
             self._peers[robot] = (self._clock(), float(interval), misses_us, heard)
+            self._departed.pop(robot, None)
 
     def forget(self, robot):
         """A peer that said goodbye (leaving heartbeat) is not missed."""
         with self._lock:
             self._peers.pop(robot, None)
+            self._departed.pop(robot, None)
             self._expected.discard(robot)
+
+    def departed(self, robot):
+        """The broker withdrew the peer's identity (its last will: the broker lost it). It is no longer
+        counted alive until heard again; the partition verdict still follows its heartbeats."""
+        with self._lock:
+            if robot in self._peers:
+                self._departed[robot] = self._clock()
+
+    def alive(self, robot):
+        """True when the peer was heard within its timeout and has not departed since."""
+        now = self._clock()
+        with self._lock:
+            entry = self._peers.get(robot)
+            return entry is not None and robot not in self._departed \
+                and now - entry[0] <= peer_timeout(entry[1], self.timeout)
 
     def reset(self):
         """After a reconnect: the echo is judged from the next heartbeat on, and the next heartbeat

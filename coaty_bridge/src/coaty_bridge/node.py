@@ -34,7 +34,7 @@ LOG = logging.getLogger(__name__)
 _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
            "offline_queue_size", "max_obstacle_extent", "max_obstacle_cells", "compact_indexes", "keepalive", "reconnect_min_delay",
-           "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "authenticate_sources", "footprint_area_size",
+           "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "discover_answers", "authenticate_sources", "footprint_area_size",
            "obstacle_area_size",
            "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
            "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")

@@ -1,0 +1,160 @@
+"""Who answers a joining robot's Discover with another robot's obstacle (``discover_answers``).
+
+Before, every robot answered with every obstacle it held: a robot joining a fleet of N robots that
+hold M obstacles got N x M Resolves (100 robots, 1,000 obstacles: ~100,000, ~48 MB). Now the
+creator of an obstacle answers for it while it is a live peer; once its identity is withdrawn (a
+clean stop, or the last will the broker sends for a robot it lost) or it is not heard, every robot
+holding the obstacle answers, as before. Bridges against a real mosquitto started by each test.
+"""
+import pytest
+
+import uuid as uuidlib
+
+from coaty_bridge import codec
+from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge.identity import identity_for
+from coaty_bridge.topics import Topic
+
+pytestmark = pytest.mark.broker
+
+# Peers learn each other within a fraction of a second; a peer counts as alive for 30 s after it was
+# last heard, so a loaded machine cannot make a live creator look gone mid-test.
+FAST_PEERS = dict(heartbeat_interval=0.2, peer_heartbeat_interval=0.2, liveness_timeout=30.0)
+
+
+def start_fleet(make_client, wait_for, names, **config):
+    clients = [make_client(name, **FAST_PEERS, **config) for name in names]
+    wait_for(lambda: all(c.liveness.alive(other) for c in clients for other in names if other != c.config.robot_name),
+             timeout=10.0, what="every robot hears every other as a live peer")
+    return clients
+
+
+def counter(client, name):
+    return client.counters().get(name, 0)
+
+
+def test_another_robots_obstacle_is_answered_by_its_creator_alone(make_client, make_update, wait_for):
+    creator, holder_1, holder_2 = start_fleet(make_client, wait_for, ["robot_0", "robot_1", "robot_2"])
+    by_0 = make_update(source="robot_0")
+    by_1 = make_update(source="robot_1")
+    for client in (creator, holder_1, holder_2):
+        client.set_current_obstacles([by_0, by_1])
+    sent_before = counter(holder_2, "resolves_sent")
+
+    joiner = make_client("robot_3", **FAST_PEERS)
+    wait_for(lambda: {u.uuid for u in joiner.received_updates} == {by_0.uuid, by_1.uuid},
+             what="both obstacles at the joining robot")
+    # robot_2 created neither: both are left to their live creators, and it sends nothing
+    wait_for(lambda: counter(holder_2, "resolves_left_to_creator") == 2, what="robot_2 leaving both to their creators")
+    assert counter(holder_2, "resolves_sent") == sent_before
+    wait_for(lambda: counter(creator, "resolves_left_to_creator") == 1 and
+             counter(holder_1, "resolves_left_to_creator") == 1, what="each creator answering only its own")
+
+
+def test_with_discover_answers_everyone_every_holder_answers(make_client, make_update, wait_for):
+    _creator, _holder_1, holder_2 = start_fleet(make_client, wait_for, ["robot_0", "robot_1", "robot_2"],
+                                                discover_answers="everyone")
+    by_0, by_1 = make_update(source="robot_0"), make_update(source="robot_1")
+    holder_2.set_current_obstacles([by_0, by_1])
+    sent_before = counter(holder_2, "resolves_sent")
+    make_client("robot_3", **FAST_PEERS)
+    wait_for(lambda: counter(holder_2, "resolves_sent") == sent_before + 2, what="robot_2 answering both")
+    assert counter(holder_2, "resolves_left_to_creator") == 0
+
+
+def test_a_creator_that_stopped_is_answered_for_by_everyone_holding_its_obstacle(make_client, make_update,
+                                                                                 wait_for):
+    creator, holder_1, holder_2 = start_fleet(make_client, wait_for, ["robot_0", "robot_1", "robot_2"])
+    by_0 = make_update(source="robot_0")
+    creator.stop(timeout=2.0)   # a clean stop: a leaving heartbeat and its identity withdrawn
+    wait_for(lambda: not holder_1.liveness.alive("robot_0") and not holder_2.liveness.alive("robot_0"),
+             what="robot_0 gone at both holders")
+    for holder in (holder_1, holder_2):
+        holder.set_current_obstacles([by_0])
+    sent_before = [counter(h, "resolves_sent") for h in (holder_1, holder_2)]
+
+    joiner = make_client("robot_3", **FAST_PEERS)
+    wait_for(lambda: all(counter(h, "resolves_sent") == before + 1
+                         for h, before in zip((holder_1, holder_2), sent_before)), what="both holders answering")
+    wait_for(lambda: [u.uuid for u in joiner.received_updates] == [by_0.uuid] * 2, what="both answers at robot_3")
+
+
+def test_the_last_will_of_a_lost_creator_hands_its_obstacles_to_the_fleet(make_client, make_update, observer,
+                                                                          wait_for):
+    creator, holder = start_fleet(make_client, wait_for, ["robot_0", "robot_1"])
+    by_0 = make_update(source="robot_0")
+    holder.set_current_obstacles([by_0])
+    # exactly what the broker sends for robot_0 when it loses it (will_set in client.py); robot_0 itself
+    # keeps running, so only the Deadvertise can make robot_1 answer
+    observer.publish(str(Topic("fleet", "DAD", creator.identity_id)), codec.deadvertise_payload([creator.identity_id]))
+    wait_for(lambda: counter(holder, "peers_departed") == 1, what="robot_1 taking the last will")
+    assert not holder.liveness.alive("robot_0")
+    sent_before = counter(holder, "resolves_sent")
+    make_client("robot_3", **FAST_PEERS)
+    wait_for(lambda: counter(holder, "resolves_sent") == sent_before + 1, what="robot_1 answering for robot_0")
+
+
+def test_a_restarted_creator_asking_gets_its_obstacles_from_the_fleet(make_client, make_update, wait_for):
+    """robot_0 restarts while the broker still holds its old session (a crash: the last will comes only
+    after the keepalive), so the fleet still hears it. Its new instance names itself in its Identity advert
+    before it asks: the fleet's copies are all that is left of its obstacles, so every holder answers."""
+    _old_instance, holder = start_fleet(make_client, wait_for, ["robot_0", "robot_1"])
+    by_0 = make_update(source="robot_0")
+    holder.set_current_obstacles([by_0])
+    sent_before = counter(holder, "resolves_sent")
+    restarted = make_client("robot_0", **FAST_PEERS)
+    wait_for(lambda: [u.uuid for u in restarted.received_updates] == [by_0.uuid], what="robot_0's obstacle back")
+    assert holder.liveness.alive("robot_0")
+    assert counter(holder, "resolves_sent") == sent_before + 1
+    assert counter(holder, "resolves_left_to_creator") == 0
+
+
+def test_discover_answers_is_checked():
+    with pytest.raises(ValueError, match="discover_answers"):
+        BridgeConfig("robot_0", discover_answers="nobody")
+    with pytest.raises(ValueError, match="discover_answers"):
+        BridgeConfig("robot_0", discover_answers=None)
+
+
+def identity_advert(name, source_id):
+    return (str(Topic("fleet", "ADV", source_id, core_type=codec.IDENTITY_CORE_TYPE)),
+            codec.advertise_payload(codec.identity_object(source_id, name)))
+
+
+def test_bad_identity_adverts_are_dropped_and_name_nobody():
+    client = CoatyBridgeClient(BridgeConfig("robot_1", **FAST_PEERS), lambda update, topic: None)  # not started
+    source_id = identity_for("fleet", "robot_0")
+    topic, _good = identity_advert("robot_0", source_id)
+    bad = [b"{not json", b'{"object": "robot_0"}', b'{"object": {"name": 7}}', b'{"object": {"name": "a/b"}}',
+           b'{"object": {"objectType": "coaty.Identity"}}']
+    for payload in bad:
+        client.handle(topic, payload)
+    dropped = sum(n for name, n in client.counters().items() if name.startswith("dropped."))
+    assert dropped == len(bad)
+    assert client._robot_of.get(source_id) is None
+    client.handle(*identity_advert("robot_0", source_id))
+    assert client._robot_of.get(source_id) == "robot_0"
+
+
+def test_an_identity_advert_under_a_sourceid_not_derived_from_its_name_is_ignored_when_authenticating():
+    client = CoatyBridgeClient(BridgeConfig("robot_1", authenticate_sources=True, **FAST_PEERS),
+                               lambda update, topic: None)
+    impostor = identity_for("fleet", "robot_9")
+    client.handle(*identity_advert("robot_0", impostor))    # robot_9 claiming to be robot_0
+    assert client._robot_of.get(impostor) is None
+    assert client.counters().get("ignored") == 1
+    client.handle(*identity_advert("robot_9", impostor))
+    assert client._robot_of.get(impostor) == "robot_9"
+
+
+def test_under_authenticated_sources_only_the_creator_answers_even_when_it_is_gone(make_update):
+    """Every authenticating receiver drops an obstacle whose source is not its sender (forged_source), so a
+    relayed copy would only cost the wire."""
+    holder = CoatyBridgeClient(BridgeConfig("robot_1", authenticate_sources=True, **FAST_PEERS),
+                               lambda update, topic: None)   # not started: what it would send is counted
+    holder.set_current_obstacles([make_update(source="robot_0"), make_update(source="robot_1")])
+    asker = identity_for("fleet", "robot_3")
+    holder.handle(str(Topic("fleet", "DSC", asker, correlation_id=str(uuidlib.uuid4()))),
+                  codec.discover_object_types_payload([codec.DEFAULT_OBJECT_TYPE]))
+    assert holder.counters().get("resolves_left_to_creator") == 1    # robot_0's, though robot_0 was never heard
+    assert holder.counters().get("resolves_sent") == 1               # its own
