@@ -31,6 +31,9 @@ BENCHMARKS = {
     "fleet_scale": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_fleet_scale")],
                     "100 simulated robots on one mosquitto (latency to every robot that must apply an update, "
                     "CPU, memory, bytes by kind), then on bridged brokers (--brokers, --bridged-robots)"),
+    "join": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_join")],
+             "a robot joining a running fleet of 40 (400 obstacles held by each): Resolves, bytes and time until "
+             "it has every obstacle, creator answers vs everyone answers"),
     "flood": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_flood")],
               "one peer floods 5,000 valid new obstacles at 3 robots: p99 latency of another robot's obstacle, "
               "handler cost per update with 10,000 vs 10 held"),
