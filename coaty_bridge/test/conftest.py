@@ -7,6 +7,8 @@ import uuid as uuidlib
 
 import pytest
 
+from polling import wait_until
+
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 if SRC not in sys.path:
     sys.path.insert(0, SRC)
@@ -41,12 +43,7 @@ def make_update():
 @pytest.fixture
 def wait_for():
     def wait(predicate, timeout=5.0, what="condition"):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return
-            time.sleep(0.01)
-        raise AssertionError("timed out after %.1f s waiting for %s" % (timeout, what))
+        return wait_until(predicate, what, timeout, interval=0.01)
     return wait
 
 

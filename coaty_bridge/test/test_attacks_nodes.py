@@ -20,6 +20,7 @@ the attack (its counter goes up on every robot), or, where the broker itself now
 (client-id takeover, an event under another robot's sourceId, anonymous logins), the broker is
 shown to have stopped it.
 """
+import functools
 import json
 import os
 import signal
@@ -35,6 +36,7 @@ from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic
 from sharing_msgs import obstacle_rules
 
+import polling
 from test_secure_default import Lines, Peer, launch_bridge_params, start_secure_broker
 
 pytestmark = [pytest.mark.ros, pytest.mark.broker]
@@ -59,14 +61,7 @@ def cell(x, y):
     return int((y - OY) / RES) * SX + int((x - OX) / RES)
 
 
-def wait_until(predicate, what, timeout=WAIT):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError("timed out after %.0f s waiting for %s" % (timeout, what))
+wait_until = functools.partial(polling.wait_until, timeout=WAIT)
 
 
 class NodeFleet:

@@ -2,6 +2,7 @@
 shipped ACL (config/mosquitto_acl.conf: publish only under one's own sourceId), the bridge's
 source check, and the same over mqtts:// with a CA and per-robot client certificates made by
 openssl."""
+import functools
 import os
 import shutil
 import subprocess
@@ -15,6 +16,7 @@ from coaty_bridge.broker import Broker
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, _make_paho_client
 from coaty_bridge.identity import identity_for
 from coaty_bridge.pki import make_ca, make_cert
+from polling import wait_until
 
 pytestmark = pytest.mark.broker
 OT = codec.DEFAULT_OBJECT_TYPE
@@ -24,13 +26,7 @@ ACL = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 WAIT = 15.0
 
 
-def wait_for(predicate, what, timeout=WAIT):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.02)
-    raise AssertionError("timed out waiting for " + what)
+wait_for = functools.partial(wait_until, timeout=WAIT)
 
 
 def obstacle(source, **fields):

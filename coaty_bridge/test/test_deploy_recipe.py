@@ -7,6 +7,7 @@ it wrote (as root it drops to the user mosquitto, as the system service does), a
 with the README's bridge parameters share an obstacle over mqtts://, while a client without
 certificate and one publishing under another robot's sourceId get nowhere. Run as root, and, when
 the test runs as root, also as the user nobody (a normal user)."""
+import functools
 import os
 import pwd
 import re
@@ -23,6 +24,7 @@ from coaty_bridge import codec
 from coaty_bridge.broker import free_port
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, _make_paho_client
 from coaty_bridge.identity import identity_for
+from polling import wait_until
 
 pytestmark = pytest.mark.broker
 PKG = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -37,13 +39,7 @@ def recipe():
     return match.group(1) + "\n"
 
 
-def wait_for(predicate, what, timeout=15.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError("timed out waiting for " + what)
+wait_for = functools.partial(wait_until, timeout=15.0, interval=0.05)
 
 
 def run_recipe(user, tmp):

@@ -8,6 +8,7 @@ Bound: after the link (or the broker, or a robot) is back, the lists are equal o
 has reconnected (at most ~reconnect_max_delay, here 1 s) and the Discover round trip is done
 (milliseconds); the test waits for the condition up to CONVERGE s.
 """
+import functools
 import threading
 import time
 
@@ -16,6 +17,7 @@ import pytest
 from coaty_bridge.broker import Broker
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.codec import ObstacleUpdate
+from polling import wait_until
 from tcp_proxy import TcpProxy
 
 from test_lifetimes_property import to_obstacle, to_update  # noqa: E402
@@ -29,13 +31,7 @@ RECONNECT_MAX = 1.0
 CONVERGE = RECONNECT_MAX + 9.0   # generous: a condition is waited for, not a time
 
 
-def wait_for(predicate, what, timeout=CONVERGE):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.02)
-    raise AssertionError("timed out after %.0f s waiting for %s" % (timeout, what))
+wait_for = functools.partial(wait_until, timeout=CONVERGE)
 
 
 class LiveRobot:

@@ -10,6 +10,7 @@ robot_1 are bridges, robot_2's credentials are held by the attacker (a compromis
       password, or with robot_2's valid login (the client id is the login), robot_0 stays connected.
 After each attack a fresh obstacle still reaches the other robot within 1 s.
 Also: run_broker's files and refusals, the bridge's refusal of plain MQTT to a remote broker."""
+import functools
 import os
 import signal
 import stat
@@ -26,6 +27,7 @@ from coaty_bridge.client import BridgeConfig, _make_paho_client
 from coaty_bridge.identity import identity_for
 from coaty_bridge.security import MONITOR, FleetCredentials, read_password_file
 
+import polling
 from test_bridge_auth import adv, obstacle as auth_obstacle
 
 pytestmark = [pytest.mark.broker]
@@ -36,13 +38,7 @@ RUN_BROKER = os.path.join(PKG, "scripts", "run_broker")
 ROBOTS = ("robot_0", "robot_1", "robot_2")
 
 
-def wait_until(predicate, what, timeout=15.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.02)
-    raise AssertionError("timed out waiting for " + what)
+wait_until = functools.partial(polling.wait_until, timeout=15.0)
 
 
 class Peer:
