@@ -56,9 +56,9 @@ def test_with_discover_answers_everyone_every_holder_answers(make_client, make_u
                                                 discover_answers="everyone")
     by_0, by_1 = make_update(source="robot_0"), make_update(source="robot_1")
     holder_2.set_current_obstacles([by_0, by_1])
-    sent_before = counter(holder_2, "resolves_sent")
+    sent_before = counter(holder_2, "obstacles_resolved")
     make_client("robot_3", **FAST_PEERS)
-    wait_for(lambda: counter(holder_2, "resolves_sent") == sent_before + 2, what="robot_2 answering both")
+    wait_for(lambda: counter(holder_2, "obstacles_resolved") == sent_before + 2, what="robot_2 answering both")
     assert counter(holder_2, "resolves_left_to_creator") == 0
 
 
@@ -71,10 +71,10 @@ def test_a_creator_that_stopped_is_answered_for_by_everyone_holding_its_obstacle
              what="robot_0 gone at both holders")
     for holder in (holder_1, holder_2):
         holder.set_current_obstacles([by_0])
-    sent_before = [counter(h, "resolves_sent") for h in (holder_1, holder_2)]
+    sent_before = [counter(h, "obstacles_resolved") for h in (holder_1, holder_2)]
 
     joiner = make_client("robot_3", **FAST_PEERS)
-    wait_for(lambda: all(counter(h, "resolves_sent") == before + 1
+    wait_for(lambda: all(counter(h, "obstacles_resolved") == before + 1
                          for h, before in zip((holder_1, holder_2), sent_before)), what="both holders answering")
     wait_for(lambda: [u.uuid for u in joiner.received_updates] == [by_0.uuid] * 2, what="both answers at robot_3")
 
@@ -89,9 +89,9 @@ def test_the_last_will_of_a_lost_creator_hands_its_obstacles_to_the_fleet(make_c
     observer.publish(str(Topic("fleet", "DAD", creator.identity_id)), codec.deadvertise_payload([creator.identity_id]))
     wait_for(lambda: counter(holder, "peers_departed") == 1, what="robot_1 taking the last will")
     assert not holder.liveness.alive("robot_0")
-    sent_before = counter(holder, "resolves_sent")
+    sent_before = counter(holder, "obstacles_resolved")
     make_client("robot_3", **FAST_PEERS)
-    wait_for(lambda: counter(holder, "resolves_sent") == sent_before + 1, what="robot_1 answering for robot_0")
+    wait_for(lambda: counter(holder, "obstacles_resolved") == sent_before + 1, what="robot_1 answering for robot_0")
 
 
 def test_a_restarted_creator_asking_gets_its_obstacles_from_the_fleet(make_client, make_update, wait_for):
@@ -101,11 +101,11 @@ def test_a_restarted_creator_asking_gets_its_obstacles_from_the_fleet(make_clien
     _old_instance, holder = start_fleet(make_client, wait_for, ["robot_0", "robot_1"])
     by_0 = make_update(source="robot_0")
     holder.set_current_obstacles([by_0])
-    sent_before = counter(holder, "resolves_sent")
+    sent_before = counter(holder, "obstacles_resolved")
     restarted = make_client("robot_0", **FAST_PEERS)
     wait_for(lambda: [u.uuid for u in restarted.received_updates] == [by_0.uuid], what="robot_0's obstacle back")
     assert holder.liveness.alive("robot_0")
-    assert counter(holder, "resolves_sent") == sent_before + 1
+    assert counter(holder, "obstacles_resolved") == sent_before + 1
     assert counter(holder, "resolves_left_to_creator") == 0
 
 
@@ -157,4 +157,36 @@ def test_under_authenticated_sources_only_the_creator_answers_even_when_it_is_go
     holder.handle(str(Topic("fleet", "DSC", asker, correlation_id=str(uuidlib.uuid4()))),
                   codec.discover_object_types_payload([codec.DEFAULT_OBJECT_TYPE]))
     assert holder.counters().get("resolves_left_to_creator") == 1    # robot_0's, though robot_0 was never heard
-    assert holder.counters().get("resolves_sent") == 1               # its own
+    assert holder.counters().get("obstacles_resolved") == 1          # its own
+
+
+def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_limit(make_client, make_update,
+                                                                                        observer, wait_for):
+    """One Resolve per obstacle cost a joining robot a message per obstacle per robot answering; the answers now
+    go as RESOLVE_BATCH obstacles per Resolve (``relatedObjects``), fewer when max_payload_bytes is reached."""
+    from coaty_bridge.client import RESOLVE_BATCH, RESOLVE_BATCH_BYTES
+    many = [make_update(source="robot_0", marked=(2001000 + 3 * i,)) for i in range(150)]
+    holder = make_client("robot_0", **FAST_PEERS)
+    holder.set_current_obstacles(many)
+    joiner = make_client("robot_1", **FAST_PEERS)
+    wait_for(lambda: len(joiner.received_updates) == len(many), what="150 obstacles at the joining robot")
+    assert sorted(u.uuid for u in joiner.received_updates) == sorted(u.uuid for u in many)
+    assert counter(holder, "obstacles_resolved") == len(many)
+    # ~450 bytes each: 32 per Resolve within RESOLVE_BATCH_BYTES (at most RESOLVE_BATCH), so 5 Resolves, not 150
+    sent = counter(holder, "resolves_sent")
+    assert -(-len(many) // RESOLVE_BATCH) <= sent <= len(many) // 20, sent
+    wait_for(lambda: len([t for t, _ in list(observer.messages) if "/RSV/%s/" % holder.identity_id in t]) == sent,
+             what="the Resolves at the observer")
+    resolves = [payload for topic, payload in list(observer.messages) if "/RSV/%s/" % holder.identity_id in topic]
+    assert all(len(payload) <= RESOLVE_BATCH_BYTES for payload in resolves)
+    holder.stop(timeout=2.0)
+    joiner.stop(timeout=2.0)
+
+    small = dict(FAST_PEERS, max_payload_bytes=2000)   # a few obstacles per Resolve
+    holder_small = make_client("robot_2", **small)
+    holder_small.set_current_obstacles([make_update(source="robot_2", marked=(2001000 + 3 * i,)) for i in range(20)])
+    joiner_small = make_client("robot_3", **small)
+    wait_for(lambda: len(joiner_small.received_updates) == 20, what="all 20 at the second joiner")
+    sent = counter(holder_small, "resolves_sent")
+    assert 20 // 4 <= sent < 20, sent
+    assert counter(joiner_small, "dropped.payload_too_large") == 0

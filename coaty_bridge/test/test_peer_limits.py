@@ -102,8 +102,9 @@ def test_attack_4_a_discover_flood_is_rate_limited_per_requester(fleet, observer
     _discover(observer, other, polite)
     for robot in robots:
         wait_for(lambda: _answered(observer, robot, [polite]), what="%s answers the other requester" % robot.name)
-        # every obstacle the robot holds, as Resolves to the other requester
-        wait_for(lambda: len([t for t, _ in observer.on("/RSV/%s/%s" % (robot.client.identity_id, polite))])
+        # every obstacle the robot holds, in its Resolves to the other requester (several per Resolve)
+        wait_for(lambda: sum(1 + len(data.get("relatedObjects", []))
+                             for _, data in observer.on("/RSV/%s/%s" % (robot.client.identity_id, polite)))
                  >= len(good), what="%s's full answer" % robot.name)
         assert len(_answered(observer, robot, flood)) == 3
         assert _bridge_counter(robot, "dropped.discover_rate_limited") == len(flood) - 3

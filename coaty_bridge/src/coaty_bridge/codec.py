@@ -365,7 +365,10 @@ def discover_object_types_payload(object_types):
     return dump({"objectTypes": list(object_types)})
 
 
-def resolve_payload(obj):
+def resolve_payload(obj, related=()):
+    """A Resolve of ``obj``; ``related`` objects go in ``relatedObjects`` (Coaty's field for more objects)."""
+    if related:
+        return dump({"object": obj, "relatedObjects": list(related)})
     return dump({"object": obj})
 
 
