@@ -29,6 +29,13 @@ def start_fleet(make_client, wait_for, names, **config):
     return clients
 
 
+def start_listening(make_client, wait_for, name, **config):
+    """A robot whose subscriptions are live (its own echo came back), so that a Discover sent next reaches it."""
+    client = make_client(name, **config)
+    wait_for(lambda: "own_echo_age" in client.liveness.values(), what=name + "'s own echo (its subscriptions live)")
+    return client
+
+
 def counter(client, name):
     return client.counters().get(name, 0)
 
@@ -166,7 +173,7 @@ def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_
     go as RESOLVE_BATCH obstacles per Resolve (``relatedObjects``), fewer when max_payload_bytes is reached."""
     from coaty_bridge.client import RESOLVE_BATCH, RESOLVE_BATCH_BYTES
     many = [make_update(source="robot_0", marked=(2001000 + 3 * i,)) for i in range(150)]
-    holder = make_client("robot_0", **FAST_PEERS)
+    holder = start_listening(make_client, wait_for, "robot_0", **FAST_PEERS)
     holder.set_current_obstacles(many)
     joiner = make_client("robot_1", **FAST_PEERS)
     wait_for(lambda: len(joiner.received_updates) == len(many), what="150 obstacles at the joining robot")
@@ -183,7 +190,7 @@ def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_
     joiner.stop(timeout=2.0)
 
     small = dict(FAST_PEERS, max_payload_bytes=2000)   # a few obstacles per Resolve
-    holder_small = make_client("robot_2", **small)
+    holder_small = start_listening(make_client, wait_for, "robot_2", **small)
     holder_small.set_current_obstacles([make_update(source="robot_2", marked=(2001000 + 3 * i,)) for i in range(20)])
     joiner_small = make_client("robot_3", **small)
     wait_for(lambda: len(joiner_small.received_updates) == 20, what="all 20 at the second joiner")
