@@ -315,6 +315,8 @@ def _make_paho_client(client_id):
 
 #: Requesters whose Discover token buckets are remembered (the quietest are forgotten beyond).
 _MAX_DISCOVER_REQUESTERS = 4096
+#: Agents (sourceIds) whose robot names are remembered; one withdrawn by a Deadvertise is forgotten.
+_MAX_KNOWN_AGENTS = 4096
 # obstacles whose fleet-wide expiry is kept before expired entries are swept (a flood cannot grow it for long)
 _MAX_FLEET_EXPIRIES = 400000
 
@@ -375,7 +377,9 @@ class CoatyBridgeClient:
         self._source_drops_lock = threading.Lock()
         self._inbox_thread = None
         self._admit_cache = {}   # topic text -> (sender key, rate-limited kind), see admit
-        self._robot_of = {}   # sourceId -> robot name, from heartbeats (for log lines a person can act on)
+        # sourceId -> robot name, from heartbeats and Identity adverts: for log lines a person can act on, and to
+        # tell which robot asks in a Discover
+        self._robot_of = {}
         self._connected = False
         self._ever_connected = False
         self._stopping = False
@@ -528,8 +532,7 @@ class CoatyBridgeClient:
                                   % (str(robot)[:40], "hears" if legacy else "misses", len(names),
                                      liveness_rules.MAX_LIST))
         check_name(robot, "heartbeat robot")
-        if len(self._robot_of) < 4096 or topic.source_id in self._robot_of:
-            self._robot_of[topic.source_id] = robot
+        self._note_robot_of(topic.source_id, robot)
         if topic.source_id == self.identity_id:
             self.liveness.own_echo(seq)   # our own peer heartbeat is an echo too
             return
@@ -1190,8 +1193,12 @@ class CoatyBridgeClient:
         if self.config.authenticate_sources and topic.source_id != identity_for(self.config.namespace, name):
             self._count("ignored")
             return
-        if len(self._robot_of) < 4096 or topic.source_id in self._robot_of:
-            self._robot_of[topic.source_id] = name
+        self._note_robot_of(topic.source_id, name)
+
+    def _note_robot_of(self, source_id, robot):
+        """sourceId -> robot, from heartbeats and Identity adverts; bounded, a known sourceId is always updated."""
+        if len(self._robot_of) < _MAX_KNOWN_AGENTS or source_id in self._robot_of:
+            self._robot_of[source_id] = robot
 
     def _on_deadvertise(self, topic, object_ids):
         """A Deadvertise: when it names a footprint sender's agent or advert series, that robot is gone.

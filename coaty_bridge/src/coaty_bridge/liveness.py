@@ -127,8 +127,8 @@ class Liveness:
         self._interval = None      # the interval announced in the last one
         # robot -> (time heard, announced interval, misses us, heard count)
         self._peers = {}
-        # robot -> time the broker withdrew its identity (its last will) after it was last heard
-        self._departed = {}
+        # robots whose identity the broker withdrew (a clean stop or its last will) since they were last heard
+        self._departed = set()
         self._expected = set(r for r in known_robots if r != robot)
 
     # ----------------------------------------------------------- sending
@@ -197,13 +197,13 @@ class Liveness:
             if robot not in self._peers and len(self._peers) >= MAX_PEERS:
                 return
             self._peers[robot] = (self._clock(), float(interval), misses_us, heard)
-            self._departed.pop(robot, None)
+            self._departed.discard(robot)
 
     def forget(self, robot):
         """A peer that said goodbye (leaving heartbeat) is not missed."""
         with self._lock:
             self._peers.pop(robot, None)
-            self._departed.pop(robot, None)
+            self._departed.discard(robot)
             self._expected.discard(robot)
 
     def departed(self, robot):
@@ -211,7 +211,7 @@ class Liveness:
         counted alive until heard again; the partition verdict still follows its heartbeats."""
         with self._lock:
             if robot in self._peers:
-                self._departed[robot] = self._clock()
+                self._departed.add(robot)
 
     def alive(self, robot):
         """True when the peer was heard within its timeout and has not departed since."""
