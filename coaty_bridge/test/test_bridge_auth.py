@@ -21,7 +21,7 @@ from polling import wait_until
 pytestmark = pytest.mark.broker
 OT = codec.DEFAULT_OBJECT_TYPE
 NS = "fleet"
-ROBOTS = ("robot_0", "robot_1", "robot_2")
+ROBOTS = ("robot_0", "robot_1", "robot_2", "robot_3")
 ACL = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "mosquitto_acl.conf")
 WAIT = 15.0
 
@@ -166,6 +166,65 @@ def test_two_bridges_share_through_the_secured_broker(secured_broker, cleanup):
     update = obstacle("robot_0")
     robot_0.publish_obstacle(update)
     wait_for(lambda: got_1 == [update], "robot_0's obstacle at robot_1")
+
+
+def test_a_late_joiner_gets_a_gone_creators_obstacle_from_its_holders_under_their_names(secured_broker, cleanup):
+    """Receivers take an obstacle only from the robot its source names. While the creator is a live peer it answers
+    for its obstacle alone; once it has left, a holder answers under its own name (as any update of another robot's
+    obstacle is sent), so the joining robot learns the obstacle instead of nothing."""
+    peers = dict(heartbeat_interval=0.2, peer_heartbeat_interval=0.2, liveness_timeout=30.0)
+    creator = bridge("robot_0", secured_broker.url, [], cleanup, **peers)
+    holder = bridge("robot_1", secured_broker.url, [], cleanup, **peers)
+    wait_for(lambda: holder.liveness.alive("robot_0") and creator.liveness.alive("robot_1"), "robot_0 and robot_1 live")
+    by_0 = obstacle("robot_0")
+    creator.set_current_obstacles([by_0])
+    holder.set_current_obstacles([by_0])
+
+    while_alive = []
+    bridge("robot_2", secured_broker.url, while_alive, cleanup, **peers)
+    wait_for(lambda: holder.counters().get("resolves_left_to_creator", 0) == 1, "robot_1 leaving it to robot_0")
+    wait_for(lambda: [(u.uuid, u.source) for u in while_alive] == [(by_0.uuid, "robot_0")], "robot_0's own answer")
+
+    creator.stop(timeout=2.0)   # a clean stop: its identity withdrawn
+    wait_for(lambda: not holder.liveness.alive("robot_0"), "robot_0 gone at robot_1")
+    after_it_left = []
+    joiner = bridge("robot_3", secured_broker.url, after_it_left, cleanup, **peers)
+    wait_for(lambda: len(after_it_left) == 1, "robot_0's obstacle at robot_3, answered by robot_1")
+    answer = after_it_left[0]
+    assert (answer.uuid, answer.source, answer.version, answer.marked) == (by_0.uuid, "robot_1", by_0.version,
+                                                                          by_0.marked)
+    assert joiner.counters().get("dropped.forged_source", 0) == 0
+
+
+def test_with_handlers_a_robot_joining_after_the_creator_left_holds_its_obstacle(secured_broker, cleanup):
+    """The same through each robot's real SharingHandler behind its bridge (wired as the nodes wire them): robot_2
+    holds robot_0's obstacle after robot_0 left, taking it as robot_1's word, with nothing dropped on the way."""
+    from test_peer_authority import Clock, Robot   # (handler + bridge of one robot; puts the handler on the path)
+    clock = Clock()
+    robots = {}
+
+    def join(name):
+        robot = Robot(name, secured_broker.url, clock, namespace=NS, authenticate_sources=True, password="pw-" + name,
+                      heartbeat_interval=0.2, peer_heartbeat_interval=0.2, liveness_timeout=30.0)
+        cleanup.append(robot.client)
+        robot.client.start()
+        robots[name] = robot
+        return robot
+
+    creator, holder = join("robot_0"), join("robot_1")
+    wait_for(lambda: creator.client.connected and holder.client.connected, "robot_0 and robot_1 connected")
+    time.sleep(0.2)  # subscriptions are set up in the connect callback
+    uuid = creator.add([1.0, 1.0, 1.4, 1.4])
+    wait_for(lambda: uuid in holder.held(), "robot_0's obstacle at robot_1")
+    creator.client.stop(timeout=2.0)
+    wait_for(lambda: not holder.client.liveness.alive("robot_0"), "robot_0 gone at robot_1")
+
+    joiner = join("robot_2")
+    wait_for(lambda: uuid in joiner.held(), "robot_0's obstacle at robot_2, which joined after robot_0 left")
+    source, _rectangle, cells = joiner.held()[uuid]
+    assert source == "robot_1" and cells == holder.held()[uuid][2]
+    assert joiner.client.counters().get("dropped.forged_source", 0) == 0
+    assert not [name for name, count in joiner.handler.counters.items() if name.startswith("dropped") and count]
 
 
 @pytest.fixture

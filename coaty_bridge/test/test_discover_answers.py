@@ -154,17 +154,28 @@ def test_an_identity_advert_under_a_sourceid_not_derived_from_its_name_is_ignore
     assert client._robot_of.get(impostor) == "robot_9"
 
 
-def test_under_authenticated_sources_only_the_creator_answers_even_when_it_is_gone(make_update):
-    """Every authenticating receiver drops an obstacle whose source is not its sender (forged_source), so a
-    relayed copy would only cost the wire."""
+def test_under_authenticated_sources_a_holder_answers_for_a_gone_creator_under_its_own_name(make_update):
+    """Every authenticating receiver drops an obstacle whose source is not its sender (forged_source): a copy
+    relayed under the creator's name would only cost the wire, and a robot joining after the creator left learnt
+    nothing. The holder sends it under its own name instead, as any update of another robot's obstacle.
+    (Through a secured broker: test_bridge_auth.py.)"""
     holder = CoatyBridgeClient(BridgeConfig("robot_1", authenticate_sources=True, **FAST_PEERS),
-                               lambda update, topic: None)   # not started: what it would send is counted
-    holder.set_current_obstacles([make_update(source="robot_0"), make_update(source="robot_1")])
+                               lambda update, topic: None)   # not started: what it sends is captured
+    sent = []
+    holder._send = lambda topic, payload, queue=True, **_: sent.append(payload)
+    by_0, by_1 = make_update(source="robot_0"), make_update(source="robot_1")
+    holder.set_current_obstacles([by_0, by_1])
     asker = identity_for("fleet", "robot_3")
     holder.handle(str(Topic("fleet", "DSC", asker, correlation_id=str(uuidlib.uuid4()))),
                   codec.discover_object_types_payload([codec.DEFAULT_OBJECT_TYPE]))
-    assert holder.counters().get("resolves_left_to_creator") == 1    # robot_0's, though robot_0 was never heard
-    assert holder.counters().get("obstacles_resolved") == 1          # its own
+    answered = [u for payload in sent
+                for u in codec.decode_resolve(codec.parse_payload(payload, codec.CodecLimits()),
+                                              codec.DEFAULT_OBJECT_TYPE).obstacles]
+    # robot_0 was never heard: it is gone, and its obstacle goes under robot_1's name, its uuid, version and cells kept
+    assert sorted((u.uuid, u.source, u.version, u.marked) for u in answered) == sorted(
+        [(by_0.uuid, "robot_1", by_0.version, by_0.marked), (by_1.uuid, "robot_1", by_1.version, by_1.marked)])
+    assert holder.counters().get("resolved_under_own_name") == 1
+    assert holder.counters().get("resolves_left_to_creator", 0) == 0
 
 
 def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_limit(make_client, make_update,

@@ -9,6 +9,7 @@ its peers for their obstacles (late joiner). Bad input is dropped, logged once
 and counted; the MQTT thread never sees an exception.
 """
 import collections
+import dataclasses
 import logging
 import math
 import select
@@ -1266,15 +1267,23 @@ class CoatyBridgeClient:
         """True when another robot's obstacle is answered by its creator alone (``discover_answers``
         "creator"): the creator is a live peer and is not the one asking (a robot's Identity advert, which
         it sends before its Discover, names it). Otherwise every robot holding it answers, as when its
-        creator is gone: the fleet's copies are all that is left. Under authenticate_sources only the
-        creator ever answers: receivers accept an obstacle only from the robot its source names."""
+        creator is gone: the fleet's copies are all that is left (under authenticate_sources, each
+        under its own name: see _as_answered)."""
         if self.config.discover_answers != "creator" or creator == self.config.robot_name:
             return False
-        if self.config.authenticate_sources:
-            return True    # a copy relayed under our sourceId is dropped as forged by every authenticating robot
         if self._robot_of.get(requester) == creator:
             return False   # the creator itself asks: it restarted, and the fleet's copies are all it has
         return self.liveness.alive(creator)
+
+    def _as_answered(self, update):
+        """The copy of an obstacle from our list that answers a Discover. Under authenticate_sources every
+        receiver drops an obstacle whose source is not the robot that sent it (forged_source), so another
+        robot's obstacle goes under our name, as any update of another robot's obstacle does: same uuid,
+        version and cells. Without it, a robot joining after a creator left learnt none of its obstacles."""
+        if not self.config.authenticate_sources or update.source == self.config.robot_name:
+            return update
+        self._count("resolved_under_own_name")
+        return dataclasses.replace(update, source=self.config.robot_name)
 
     def _discover_allowed(self, requester):
         """True when a Discover from `requester` may be answered now (its own token bucket; the
@@ -1311,6 +1320,6 @@ class CoatyBridgeClient:
                 if update is None:
                     self._count("resolve_skipped_expired")
                     continue
-                answers.append(update)
+                answers.append(self._as_answered(update))
         if answers:
             self._resolve_obstacles(reply, answers)
