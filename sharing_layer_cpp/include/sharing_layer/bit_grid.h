@@ -3,7 +3,8 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <vector>
+
+#include "sharing_layer/tile_pool.h"
 
 namespace sharing_layer
 {
@@ -22,71 +23,25 @@ public:
   /// @brief cell_count cells, all false.
   void assign(std::size_t cell_count)
   {
-    release();
     size_ = cell_count;
-    dir_.assign((cell_count + kTileCells - 1) / kTileCells, kZeros);
-    pool_.assign(2 * kWords, 0);
-    for (std::size_t w = kWords; w < 2 * kWords; ++w)
-    {
-      pool_[w] = ~std::uint64_t{ 0 };
-    }
+    tiles_.assign((cell_count + 63) / 64, { 0, ~std::uint64_t{ 0 } });  // constants: kZeros, kOnes
   }
   /// @brief No cells (and no memory).
   void release()
   {
-    std::vector<std::uint32_t>().swap(dir_);
-    std::vector<std::uint64_t>().swap(pool_);
-    std::vector<std::uint32_t>().swap(free_);
+    tiles_.release();
     size_ = 0;
   }
   bool empty() const { return size_ == 0; }
   std::size_t size() const { return size_; }
   /// @return the heap it holds: directory, tiles (with what their vectors reserved) and the free list
-  std::size_t bytes() const
-  {
-    return dir_.capacity() * sizeof(std::uint32_t) + pool_.capacity() * sizeof(std::uint64_t) +
-           free_.capacity() * sizeof(std::uint32_t);
-  }
-  /// @return the tiles that take memory (neither all false nor all true)
-  std::size_t mixedTiles() const { return pool_.empty() ? 0 : pool_.size() / kWords - 2 - free_.size(); }
+  std::size_t bytes() const { return tiles_.bytes(); }
+  /// @return tiles neither all false nor all true (each takes kTileCells / 8 bytes)
+  std::size_t mixedTiles() const { return tiles_.tilesInUse(); }
 
-  bool test(std::size_t index) const { return (word(index) >> (index & 63)) & 1u; }
-  void set(std::size_t index)
-  {
-    std::uint32_t& tile = dir_[index / kTileCells];
-    if (tile == kOnes)
-    {
-      return;
-    }
-    if (tile == kZeros)
-    {
-      tile = newTile(kZeros);
-    }
-    std::uint64_t& w = pool_[tile * kWords + (index % kTileCells) / 64];
-    w |= std::uint64_t{ 1 } << (index & 63);
-    if (w == ~std::uint64_t{ 0 })
-    {
-      settle(tile);
-    }
-  }
-  void reset(std::size_t index)
-  {
-    std::uint32_t& tile = dir_[index / kTileCells];
-    if (tile == kZeros)
-    {
-      return;
-    }
-    if (tile == kOnes)
-    {
-      tile = newTile(kOnes);
-    }
-    std::uint64_t& w = pool_[tile * kWords + (index % kTileCells) / 64];
-    w &= ~(std::uint64_t{ 1 } << (index & 63));
-    if (w == 0)
-    {
-      settle(tile);
-    }
-  }
+  bool test(std::size_t index) const { return (tiles_.at(index / 64) >> (index & 63)) & 1u; }
+  void set(std::size_t index) { put<true>(index); }
+  void reset(std::size_t index) { put<false>(index); }
   void set(std::size_t index, bool value) { value ? set(index) : reset(index); }
 
 private:
@@ -94,35 +49,34 @@ private:
   static constexpr std::uint32_t kZeros = 0;  ///< the shared all-false tile
   static constexpr std::uint32_t kOnes = 1;   ///< the shared all-true tile
 
-  std::uint64_t word(std::size_t index) const
+  /// @brief Sets one cell to kValue: a constant tile of the other value is copied first, and a tile left uniform
+  /// points at its constant again.
+  template <bool kValue>
+  void put(std::size_t index)
   {
-    return pool_[dir_[index / kTileCells] * kWords + (index % kTileCells) / 64];
+    constexpr std::uint32_t kSame = kValue ? kOnes : kZeros, kOther = kValue ? kZeros : kOnes;
+    constexpr std::uint64_t kUniform = kValue ? ~std::uint64_t{ 0 } : 0;
+    std::uint32_t& tile = tiles_.slot(index / 64);
+    if (tile == kSame)
+    {
+      return;
+    }
+    if (tile == kOther)
+    {
+      tile = tiles_.newTile(~kUniform);
+    }
+    std::uint64_t& w = tiles_.inTile(tile, index / 64);
+    const std::uint64_t bit = std::uint64_t{ 1 } << (index & 63);
+    w = kValue ? (w | bit) : (w & ~bit);
+    if (w == kUniform)
+    {
+      settle(tile);
+    }
   }
-  /// @return a tile of its own holding what `like` (kZeros or kOnes) holds
-  std::uint32_t newTile(std::uint32_t like)
-  {
-    std::uint32_t tile = 0;
-    if (!free_.empty())
-    {
-      tile = free_.back();
-      free_.pop_back();
-    }
-    else
-    {
-      tile = static_cast<std::uint32_t>(pool_.size() / kWords);
-      pool_.resize(pool_.size() + kWords);
-    }
-    const std::uint64_t fill = like == kOnes ? ~std::uint64_t{ 0 } : 0;
-    for (std::size_t w = 0; w < kWords; ++w)
-    {
-      pool_[tile * kWords + w] = fill;
-    }
-    return tile;
-  }
-  /// @brief A tile (at `slot` in the directory) that may have become uniform goes back to the shared constant.
+  /// @brief Points a tile (at `slot` in the directory) at a constant once its cells are all false or all true.
   void settle(std::uint32_t& slot)
   {
-    const std::uint64_t* w = &pool_[slot * kWords];
+    const std::uint64_t* w = tiles_.tileData(slot);
     bool zeros = true, ones = true;
     for (std::size_t i = 0; i < kWords; ++i)
     {
@@ -131,14 +85,11 @@ private:
     }
     if (zeros || ones)
     {
-      free_.push_back(slot);
-      slot = zeros ? kZeros : kOnes;
+      tiles_.giveBack(slot, zeros ? kZeros : kOnes);
     }
   }
 
-  std::vector<std::uint32_t> dir_;   ///< per tile: its place in pool_ (kZeros, kOnes: the shared constants)
-  std::vector<std::uint64_t> pool_;  ///< the tiles, kWords words each; the first two are the constants
-  std::vector<std::uint32_t> free_;  ///< tiles of pool_ no longer used
+  TilePool<std::uint64_t, kWords, 2> tiles_;  ///< words of 64 cells, kWords to a tile
   std::size_t size_ = 0;
 };
 }  // namespace sharing_layer

@@ -5,7 +5,8 @@
 #include <cstdint>
 #include <cstring>
 #include <utility>
-#include <vector>
+
+#include "sharing_layer/tile_pool.h"
 
 namespace sharing_layer
 {
@@ -35,46 +36,39 @@ public:
   /// @brief cell_count cells, no bit set.
   void assign(std::size_t cell_count)
   {
-    release();
     size_ = cell_count;
-    dir_.assign((cell_count + kTileCells - 1) / kTileCells, 0);
-    pool_.assign(kTileCells, 0);  // tile 0: the shared zeros
+    tiles_.assign(cell_count, { 0 });  // constant 0: the shared zeros
   }
   /// @brief No cells (and no memory).
   void release()
   {
-    std::vector<std::uint32_t>().swap(dir_);
-    std::vector<std::uint8_t>().swap(pool_);
-    std::vector<std::uint32_t>().swap(free_);
+    tiles_.release();
     size_ = 0;
   }
   /// @return the cell's byte (0 in a tile not in use)
-  std::uint8_t get(std::uint32_t index) const
-  {
-    return pool_[dir_[index / kTileCells] * kTileCells + index % kTileCells];
-  }
+  std::uint8_t get(std::uint32_t index) const { return tiles_.at(index); }
   bool has(std::uint32_t index, std::uint8_t bit) const { return (get(index) & bit) != 0; }
   void set(std::uint32_t index, std::uint8_t bits)
   {
-    std::uint32_t& tile = dir_[index / kTileCells];
-    if (tile == 0)
+    std::uint32_t& tile = tiles_.slot(index);
+    if (tile == kZeros)
     {
       if (bits == 0)
       {
         return;
       }
-      tile = newTile();
+      tile = tiles_.newTile(0);
     }
-    pool_[tile * kTileCells + index % kTileCells] |= bits;
+    tiles_.inTile(tile, index) |= bits;
   }
   void clear(std::uint32_t index, std::uint8_t bits)
   {
-    std::uint32_t& tile = dir_[index / kTileCells];
-    if (tile == 0)
+    std::uint32_t& tile = tiles_.slot(index);
+    if (tile == kZeros)
     {
       return;
     }
-    std::uint8_t& byte = pool_[tile * kTileCells + index % kTileCells];
+    std::uint8_t& byte = tiles_.inTile(tile, index);
     byte &= static_cast<std::uint8_t>(~bits);
     if (byte == 0)
     {
@@ -83,40 +77,22 @@ public:
   }
   std::size_t size() const { return size_; }
   /// @return the heap it holds: directory, tiles (with what their vectors reserved) and the free list
-  std::size_t bytes() const
-  {
-    return dir_.capacity() * sizeof(std::uint32_t) + pool_.capacity() + free_.capacity() * sizeof(std::uint32_t);
-  }
+  std::size_t bytes() const { return tiles_.bytes(); }
   /// @return the tiles in use
-  std::size_t tilesInUse() const { return pool_.empty() ? 0 : pool_.size() / kTileCells - 1 - free_.size(); }
+  std::size_t tilesInUse() const { return tiles_.tilesInUse(); }
   void swap(CellFlags& other)
   {
-    dir_.swap(other.dir_);
-    pool_.swap(other.pool_);
-    free_.swap(other.free_);
+    tiles_.swap(other.tiles_);
     std::swap(size_, other.size_);
   }
 
 private:
-  std::uint32_t newTile()
-  {
-    std::uint32_t tile = 0;
-    if (!free_.empty())
-    {
-      tile = free_.back();
-      free_.pop_back();
-    }
-    else
-    {
-      tile = static_cast<std::uint32_t>(pool_.size() / kTileCells);
-      pool_.resize(pool_.size() + kTileCells, 0);
-    }
-    return tile;
-  }
+  static constexpr std::uint32_t kZeros = 0;  ///< the shared tile of zeros: a tile not in use
+
   /// @brief Gives a tile (at `slot` in the directory) back once none of its cells holds a bit.
   void settle(std::uint32_t& slot)
   {
-    const std::uint8_t* bytes = &pool_[slot * kTileCells];
+    const std::uint8_t* bytes = tiles_.tileData(slot);
     for (std::size_t i = 0; i < kTileCells; i += sizeof(std::uint64_t))
     {
       std::uint64_t w = 0;
@@ -126,13 +102,10 @@ private:
         return;
       }
     }
-    free_.push_back(slot);
-    slot = 0;
+    tiles_.giveBack(slot, kZeros);
   }
 
-  std::vector<std::uint32_t> dir_;   ///< per tile: its place in pool_ (0: not in use, reads as zeros)
-  std::vector<std::uint8_t> pool_;   ///< the tiles in use, kTileCells bytes each; the first is the shared zeros
-  std::vector<std::uint32_t> free_;  ///< tiles of pool_ given back
+  TilePool<std::uint8_t, kTileCells, 1> tiles_;
   std::size_t size_ = 0;
 };
 
