@@ -25,7 +25,9 @@ inline int signOf(int x)
  *
  * The action is taken by value, as costmap_2d takes it, and keeps its state behind pointers. The cell offset is
  * walked in 64 bits: a 32-bit offset is zero-extended again before every write (a quarter more instructions per
- * cell than costmap_2d's loop at -O2); an offset inside the grid is the same number either way.
+ * cell than costmap_2d's loop at -O2); an offset inside the grid is the same number either way. Two steps per pass
+ * of the loop: its count and branch once per two cells took the scan pass from 0.87 to 0.80 x upstream's at 3 m
+ * (-O2; 0.82 to 0.73 at -O3), the cells visited and their order unchanged (issue 29).
  */
 template <class Action>
 inline void bresenham2D(Action at, unsigned int abs_da, unsigned int abs_db, int error_b, int offset_a,
@@ -36,8 +38,7 @@ inline void bresenham2D(Action at, unsigned int abs_da, unsigned int abs_db, int
   // (a negative step, sign-extended, wraps to the right cell: unsigned arithmetic is modulo 2^64)
   const std::size_t step_a = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(offset_a));
   const std::size_t step_b = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(offset_b));
-  for (unsigned int i = 0; i < end; ++i)
-  {
+  const auto step = [&]() {
     at(cell);
     cell += step_a;
     error_b += abs_db;
@@ -46,6 +47,16 @@ inline void bresenham2D(Action at, unsigned int abs_da, unsigned int abs_db, int
       cell += step_b;
       error_b -= abs_da;
     }
+  };
+  unsigned int left = end;
+  for (; left >= 2; left -= 2)
+  {
+    step();
+    step();
+  }
+  if (left != 0)
+  {
+    step();
   }
   at(cell);
 }
