@@ -201,19 +201,18 @@ def test_with_handlers_a_robot_joining_after_the_creator_left_holds_its_obstacle
     holds robot_0's obstacle after robot_0 left, taking it as robot_1's word, with nothing dropped on the way."""
     from test_peer_authority import Clock, Robot   # (handler + bridge of one robot; puts the handler on the path)
     clock = Clock()
-    robots = {}
 
     def join(name):
         robot = Robot(name, secured_broker.url, clock, namespace=NS, authenticate_sources=True, password="pw-" + name,
                       heartbeat_interval=0.2, peer_heartbeat_interval=0.2, liveness_timeout=30.0)
         cleanup.append(robot.client)
         robot.client.start()
-        robots[name] = robot
         return robot
 
     creator, holder = join("robot_0"), join("robot_1")
-    wait_for(lambda: creator.client.connected and holder.client.connected, "robot_0 and robot_1 connected")
-    time.sleep(0.2)  # subscriptions are set up in the connect callback
+    # each heard the other's heartbeats: both are subscribed, so the obstacle advertised next reaches robot_1
+    wait_for(lambda: holder.client.liveness.alive("robot_0") and creator.client.liveness.alive("robot_1"),
+             "robot_0 and robot_1 live")
     uuid = creator.add([1.0, 1.0, 1.4, 1.4])
     wait_for(lambda: uuid in holder.held(), "robot_0's obstacle at robot_1")
     creator.client.stop(timeout=2.0)
