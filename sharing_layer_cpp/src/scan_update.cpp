@@ -9,6 +9,7 @@
 #include <string>
 
 #include "sharing_layer/cost_values.h"
+#include "sharing_layer/fan_clearing.h"
 #include "sharing_layer/raytrace.h"
 #include "beam_index.h"
 
@@ -80,6 +81,7 @@ struct ScanScratch
 {
   std::vector<std::uint32_t> seen_cells;
   std::vector<double> range_sq;
+  std::vector<LineSteps> beam_lines;
 };
 
 ScanScratch& scanScratch()
@@ -131,6 +133,7 @@ public:
     , watch_(watch)
     , seen_cells_(scanScratch().seen_cells)
     , range_sq_(scanScratch().range_sq)
+    , beam_lines_(scanScratch().beam_lines)
   {
   }
 
@@ -229,6 +232,7 @@ private:
   CellFlags* flags_ = nullptr;
   std::vector<std::uint32_t>& seen_cells_;  ///< watched cells given evidence by this scan, each once
   std::vector<double>& range_sq_;
+  std::vector<LineSteps>& beam_lines_;  ///< the clearing pass's lines, cleared together (clearFan)
   scan_detail::BeamIndex* beams_ = nullptr;
   bool watching_ = false;
   bool clearing_ = false;
@@ -276,9 +280,11 @@ void ScanRun::validateWatch() const
 void ScanRun::clearPass()
 {
   // Clearing, exactly as without a watch; the beams that reach a watched cell are walked again in walkWatched.
+  // The lines are collected here and cleared together: the same cells as beam by beam, written once near the
+  // sensor where the beams overlap (clearFan).
+  beam_lines_.clear();
   const double map_end_x = g_.endX();
   const double map_end_y = g_.endY();
-  SetCellAction clear{ costs_, FREE_SPACE };
   touch_.touchPoint(ox_, oy_);
   const double ox = ox_, oy = oy_;
   for (std::size_t pi = 0; pi < observation_.points.size(); ++pi)
@@ -343,16 +349,13 @@ void ScanRun::clearPass()
       const double scale = std::min(1.0, limits_.raytrace_range / std::sqrt(dx * dx + dy * dy));
       touch_.touchPoint(ox + dx * scale, oy + dy * scale);
     }
-    const LineSteps line = lineSteps(x0_, y0_, x1, y1, cell_raytrace_range_);
-    const int row = static_cast<int>(g_.size_x);
-    bresenham2D(clear, line.abs_da, line.abs_db, static_cast<int>(line.abs_da / 2),
-                line.x_major ? line.sign_a : line.sign_a * row, line.x_major ? line.sign_b * row : line.sign_b,
-                y0_ * g_.size_x + x0_, line.end);
+    beam_lines_.push_back(lineSteps(x0_, y0_, x1, y1, cell_raytrace_range_));
     if (watching_)
     {
       beams_->add(pi, x1, y1, clipped);
     }
   }
+  clearFan(costs_, g_.size_x, x0_, y0_, beam_lines_, FREE_SPACE);
 }
 
 double ScanRun::hitRangeSquared() const

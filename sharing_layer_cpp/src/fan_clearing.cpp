@@ -1,0 +1,187 @@
+#include "sharing_layer/fan_clearing.h"
+
+#include <algorithm>
+#include <cstddef>
+
+namespace sharing_layer
+{
+namespace
+{
+/// A beam of a run: its slope B / A and starting error term h, as bresenham2D steps it.
+struct RunBeam
+{
+  std::uint32_t A, B, h;
+};
+
+/// Runs shorter than this are raytraced beam by beam: the fill's per-step work would cost more than it saves.
+constexpr std::size_t kMinRun = 3;
+
+/// -1, 0, 1 as B_j / A_j is below, equal to, above B_k / A_k
+int compareSlope(const RunBeam& j, const RunBeam& k)
+{
+  const std::uint64_t l = static_cast<std::uint64_t>(j.B) * k.A, r = static_cast<std::uint64_t>(k.B) * j.A;
+  return (l > r) - (l < r);
+}
+
+/// The octant of a line: its dominant axis and the signs along a and b (a b sign of 0, a line along a, goes with +).
+int octant(const LineSteps& line)
+{
+  return (line.x_major ? 4 : 0) + (line.sign_a > 0 ? 2 : 0) + (line.sign_b >= 0 ? 1 : 0);
+}
+
+class FanRun
+{
+public:
+  FanRun(std::uint8_t* costs, unsigned int size_x, unsigned int x0, unsigned int y0, std::uint8_t value)
+    : costs_(costs), row_(static_cast<int>(size_x)), origin_(static_cast<std::size_t>(y0) * size_x + x0), value_(value)
+  {
+  }
+
+  FanStats run(const std::vector<LineSteps>& lines)
+  {
+    run_.clear();
+    run_lines_.clear();
+    int run_octant = -1;
+    for (const LineSteps& line : lines)
+    {
+      if (line.end < kNearSteps)
+      {
+        raytrace(line, 0, line.end);  // too short to share the near field
+        continue;
+      }
+      const int o = octant(line);
+      if (o != run_octant || !closeTo(run_.back(), line))
+      {
+        flush();
+        run_octant = o;
+      }
+      run_.push_back(RunBeam{ line.abs_da, line.abs_db, line.abs_da / 2 });
+      run_lines_.push_back(&line);
+      if (line.end > kNearSteps)
+      {
+        raytrace(line, kNearSteps + 1, line.end);
+      }
+    }
+    flush();
+    return stats_;
+  }
+
+private:
+  /// Whether beam k's line stays within one cell of the run's last beam j along b over the near steps:
+  /// kNearSteps |B_k / A_k - B_j / A_j| + 1 / (2 min(A_j, A_k)) < 1, times 2 A_j A_k.
+  static bool closeTo(const RunBeam& j, const LineSteps& k)
+  {
+    const std::uint64_t aj = j.A, bj = j.B, ak = k.abs_da, bk = k.abs_db;
+    const std::uint64_t cross = bk * aj > bj * ak ? bk * aj - bj * ak : bj * ak - bk * aj;
+    return 2 * static_cast<std::uint64_t>(kNearSteps) * cross + std::max(aj, ak) < 2 * aj * ak;
+  }
+
+  std::ptrdiff_t stepA(const LineSteps& line) const { return line.x_major ? line.sign_a : line.sign_a * row_; }
+  std::ptrdiff_t stepB(const LineSteps& line) const
+  {
+    const int sign_b = line.sign_b == 0 ? 1 : line.sign_b;  // (no b step is ever taken then)
+    return line.x_major ? sign_b * row_ : sign_b;
+  }
+
+  /// Steps from .. to of one line, as bresenham2D visits them.
+  void raytrace(const LineSteps& line, unsigned int from, unsigned int to)
+  {
+    SetCellAction set{ costs_, value_ };
+    const std::uint64_t carries = from == 0 ? 0 : line.carries(from);
+    const std::uint64_t error = line.abs_da / 2 + static_cast<std::uint64_t>(from) * line.abs_db -
+                                carries * line.abs_da;
+    const std::size_t cell = origin_ + static_cast<std::size_t>(stepA(line) * static_cast<std::ptrdiff_t>(from)) +
+                             static_cast<std::size_t>(stepB(line) * static_cast<std::ptrdiff_t>(carries));
+    bresenham2D(set, line.abs_da, line.abs_db, static_cast<int>(error), static_cast<int>(stepA(line)),
+                static_cast<int>(stepB(line)), static_cast<std::uint32_t>(cell), to - from);
+  }
+
+  /// Fills steps 0 .. kNearSteps of the run's beams (their later steps are raytraced already).
+  void flush()
+  {
+    if (run_.empty())
+    {
+      return;
+    }
+    if (run_.size() < kMinRun)
+    {
+      for (const LineSteps* line : run_lines_)
+      {
+        raytrace(*line, 0, std::min(line->end, kNearSteps));
+      }
+      run_.clear();
+      run_lines_.clear();
+      return;
+    }
+    ++stats_.groups;
+    stats_.grouped_beams += run_.size();
+    // At every step b only grows with the slope (see clearFan), so the run covers the b of its least and its
+    // greatest slope and every b between.
+    std::size_t steepest = 0, flattest = 0;
+    for (std::size_t k = 1; k < run_.size(); ++k)
+    {
+      steepest = compareSlope(run_[k], run_[steepest]) > 0 ? k : steepest;
+      flattest = compareSlope(run_[k], run_[flattest]) < 0 ? k : flattest;
+    }
+    const RunBeam top = run_[steepest], bottom = run_[flattest];
+    const std::ptrdiff_t step_a = stepA(*run_lines_.front());
+    const std::ptrdiff_t step_b = stepB(*run_lines_.front());
+    std::uint32_t top_error = top.h, bottom_error = bottom.h;
+    std::uint32_t top_b = 0, bottom_b = 0;
+    std::size_t column = origin_;  // the cell at step s, b = 0
+    for (unsigned int s = 0; s <= kNearSteps; ++s)
+    {
+      std::size_t cell = column + static_cast<std::size_t>(step_b * static_cast<std::ptrdiff_t>(bottom_b));
+      for (std::uint32_t b = bottom_b; b <= top_b; ++b)
+      {
+        costs_[cell] = value_;
+        cell += static_cast<std::size_t>(step_b);
+      }
+      stats_.near_cells += top_b - bottom_b + 1;
+      column += static_cast<std::size_t>(step_a);
+      top_error += top.B;
+      if (top_error >= top.A)
+      {
+        top_error -= top.A;
+        ++top_b;
+      }
+      bottom_error += bottom.B;
+      if (bottom_error >= bottom.A)
+      {
+        bottom_error -= bottom.A;
+        ++bottom_b;
+      }
+    }
+    run_.clear();
+    run_lines_.clear();
+  }
+
+  std::uint8_t* costs_;
+  int row_;
+  std::size_t origin_;
+  std::uint8_t value_;
+  FanStats stats_;
+  std::vector<RunBeam>& run_ = scratch().run;
+  std::vector<const LineSteps*>& run_lines_ = scratch().lines;
+
+  /// Kept from fan to fan (per thread), so that a scan does not allocate them again.
+  struct Scratch
+  {
+    std::vector<RunBeam> run;
+    std::vector<const LineSteps*> lines;
+  };
+  static Scratch& scratch()
+  {
+    thread_local Scratch s;
+    return s;
+  }
+};
+}  // namespace
+
+FanStats clearFan(std::uint8_t* costs, unsigned int size_x, unsigned int x0, unsigned int y0,
+                  const std::vector<LineSteps>& lines, std::uint8_t value)
+{
+  return FanRun(costs, size_x, x0, y0, value).run(lines);
+}
+
+}  // namespace sharing_layer
