@@ -201,3 +201,40 @@ TEST(FanClearing, AnEmptyFanWritesNothing)
   const std::vector<std::uint8_t> grid = together(fan);
   EXPECT_EQ(std::vector<std::uint8_t>(100, kUntouched), grid);
 }
+
+TEST(FanClearing, LongLinesAndWideGridsAroundTheReciprocalLimits)
+{
+  // Lines up to 16384 cells along a are stepped by a reciprocal, longer ones (and any on grids wider than 32767)
+  // by bresenham2D: both sides of each limit, in a few rows so that the grids stay small.
+  for (const unsigned int size_x : { 20000u, 40000u })
+  {
+    Fan fan;
+    fan.size_x = size_x;
+    fan.size_y = 7;
+    fan.x0 = 1;
+    fan.y0 = 3;
+    for (const unsigned int length : { 16383u, 16384u, 16385u, 19998u })
+    {
+      for (const unsigned int y1 : { 0u, 1u, 3u, 5u, 6u })
+      {
+        fan.lines.push_back(lineSteps(1, 3, 1 + length, y1));
+      }
+    }
+    fan.lines.push_back(lineSteps(1, 3, 1 + 16384, 6, 9000));  // cut
+    EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan))) << size_x << " cells wide";
+  }
+  // And along y: a tall, narrow grid.
+  Fan fan;
+  fan.size_x = 5;
+  fan.size_y = 20000;
+  fan.x0 = 2;
+  fan.y0 = 19990;
+  for (const unsigned int length : { 16383u, 16384u, 16385u, 19990u })
+  {
+    for (const unsigned int x1 : { 0u, 1u, 3u, 4u })
+    {
+      fan.lines.push_back(lineSteps(2, 19990, x1, 19990 - length));
+    }
+  }
+  EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan)));
+}
