@@ -3,7 +3,8 @@
 #include <algorithm>
 #include <cstddef>
 
-#if defined(__SSE2__)
+#if defined(__SSE2__) && defined(__x86_64__)
+#define SHARING_LAYER_RECIPROCAL_STEPS 1
 #include <emmintrin.h>  // (part of every x86-64 target: no runtime dispatch needed)
 #endif
 
@@ -96,7 +97,7 @@ private:
   /// Steps from .. to of one line, as bresenham2D visits them.
   void raytrace(const LineSteps& line, unsigned int from, unsigned int to)
   {
-#if defined(__SSE2__)
+#if defined(SHARING_LAYER_RECIPROCAL_STEPS)
     if (line.abs_da != 0 && line.abs_da <= kMaxReciprocalLength && row_ <= kMaxReciprocalRow)
     {
       raytraceSse2(line, from, to);
@@ -113,14 +114,15 @@ private:
                 static_cast<int>(stepB(line)), static_cast<std::uint32_t>(cell), to - from);
   }
 
-#if defined(__SSE2__)
+#if defined(SHARING_LAYER_RECIPROCAL_STEPS)
   /**
-   * The same cells, four steps at a time and without a branch per step: step s's b is floor(n / A) with
-   * n = h + s B, computed as (n M) >> k with M = ceil(2^k / A), k = 31 + floor(log2 A). That is exact: with
-   * M A = 2^k + e, 0 <= e < A < 2^(k - 30), and n = q A + r, n M / 2^k = q + (r + n e / 2^k) / A, where
-   * n e < 2^30 e < 2^k, so the fraction stays below (r + 1) / A <= 1. n < 2^30 holds for A <= kMaxReciprocalLength
-   * (n <= A / 2 + A^2). Bresenham's carried branch mispredicts on most slopes; this runs the reference scan's
-   * steps in 0.73 of bresenham2D's time (-O2). Cell offsets are computed in 32 bits, as bresenham2D takes them.
+   * The same cells, without a branch per step: step s's b is floor(n / A) with n = h + s B, computed as (n M) >> k
+   * with M = ceil(2^k / A), k = 31 + floor(log2 A). That is exact: with M A = 2^k + e, 0 <= e < A < 2^(k - 30),
+   * and n = q A + r, n M / 2^k = q + (r + n e / 2^k) / A, where n e < 2^30 e < 2^k, so the fraction stays below
+   * (r + 1) / A <= 1. n < 2^30 holds for A <= kMaxReciprocalLength (n <= A / 2 + A^2). Four steps per vector,
+   * two vectors per pass. Bresenham's carried branch mispredicts on most slopes; on the reference scan's beams
+   * this takes about half of bresenham2D's time (-O2). Cell offsets are computed in 32 bits, as bresenham2D takes
+   * them.
    */
   void raytraceSse2(const LineSteps& line, unsigned int from, unsigned int to)
   {
@@ -132,36 +134,54 @@ private:
     const bool b_down = line.sign_b < 0;
     std::uint32_t n = A / 2 + from * B;  // (< 2^30, see above)
     std::uint32_t base = static_cast<std::uint32_t>(origin_) + from * step_a;  // the cell at step s, b = 0
-    unsigned int left = to - from + 1;
+    const unsigned int count = to - from + 1;
+    unsigned int left = count;
     if (left >= 4)
     {
       const __m128i reciprocal = _mm_set1_epi32(static_cast<int>(static_cast<std::uint32_t>(M)));
       const __m128i shift = _mm_cvtsi32_si128(k);
       const __m128i row = _mm_set1_epi32(static_cast<int>(b_row));  // (< 2^15: pmaddwd's high halves are 0)
-      __m128i numerators = _mm_setr_epi32(static_cast<int>(n), static_cast<int>(n + B), static_cast<int>(n + 2 * B),
-                                          static_cast<int>(n + 3 * B));
-      __m128i bases = _mm_setr_epi32(static_cast<int>(base), static_cast<int>(base + step_a),
-                                     static_cast<int>(base + 2 * step_a), static_cast<int>(base + 3 * step_a));
-      const __m128i next_numerators = _mm_set1_epi32(static_cast<int>(4 * B));
-      const __m128i next_bases = _mm_set1_epi32(static_cast<int>(4 * step_a));
-      alignas(16) std::uint32_t cells[4];
-      for (; left >= 4; left -= 4)
-      {
+      const auto cells_of = [&](__m128i numerators, __m128i bases) {
         const __m128i even = _mm_srl_epi64(_mm_mul_epu32(numerators, reciprocal), shift);
         const __m128i odd = _mm_srl_epi64(_mm_mul_epu32(_mm_srli_epi64(numerators, 32), reciprocal), shift);
         const __m128i b = _mm_or_si128(even, _mm_slli_epi64(odd, 32));  // four b, each < 2^15
         const __m128i b_offset = _mm_madd_epi16(b, row);
-        _mm_store_si128(reinterpret_cast<__m128i*>(cells),
-                        b_down ? _mm_sub_epi32(bases, b_offset) : _mm_add_epi32(bases, b_offset));
-        costs_[cells[0]] = value_;
-        costs_[cells[1]] = value_;
-        costs_[cells[2]] = value_;
-        costs_[cells[3]] = value_;
-        numerators = _mm_add_epi32(numerators, next_numerators);
-        bases = _mm_add_epi32(bases, next_bases);
+        return b_down ? _mm_sub_epi32(bases, b_offset) : _mm_add_epi32(bases, b_offset);
+      };
+      const auto write = [this](__m128i cells) {
+        // (two 64-bit moves out of the vector: storing it and loading the four back cost a fifth more)
+        const std::uint64_t low = static_cast<std::uint64_t>(_mm_cvtsi128_si64(cells));
+        const std::uint64_t high = static_cast<std::uint64_t>(_mm_cvtsi128_si64(_mm_unpackhi_epi64(cells, cells)));
+        costs_[static_cast<std::uint32_t>(low)] = value_;
+        costs_[low >> 32] = value_;
+        costs_[static_cast<std::uint32_t>(high)] = value_;
+        costs_[high >> 32] = value_;
+      };
+      __m128i numerators = _mm_setr_epi32(static_cast<int>(n), static_cast<int>(n + B), static_cast<int>(n + 2 * B),
+                                          static_cast<int>(n + 3 * B));
+      __m128i bases = _mm_setr_epi32(static_cast<int>(base), static_cast<int>(base + step_a),
+                                     static_cast<int>(base + 2 * step_a), static_cast<int>(base + 3 * step_a));
+      const __m128i four_numerators = _mm_set1_epi32(static_cast<int>(4 * B));
+      const __m128i four_bases = _mm_set1_epi32(static_cast<int>(4 * step_a));
+      const __m128i eight_numerators = _mm_add_epi32(four_numerators, four_numerators);
+      const __m128i eight_bases = _mm_add_epi32(four_bases, four_bases);
+      for (; left >= 8; left -= 8)
+      {
+        const __m128i first = cells_of(numerators, bases);
+        const __m128i second =
+            cells_of(_mm_add_epi32(numerators, four_numerators), _mm_add_epi32(bases, four_bases));
+        write(first);
+        write(second);
+        numerators = _mm_add_epi32(numerators, eight_numerators);
+        bases = _mm_add_epi32(bases, eight_bases);
       }
-      n += (to - from + 1 - left) * B;
-      base += (to - from + 1 - left) * step_a;
+      if (left >= 4)
+      {
+        write(cells_of(numerators, bases));
+        left -= 4;
+      }
+      n += (count - left) * B;
+      base += (count - left) * step_a;
     }
     for (; left != 0; --left)
     {

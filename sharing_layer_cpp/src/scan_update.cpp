@@ -287,6 +287,8 @@ void ScanRun::clearPass()
   const double map_end_y = g_.endY();
   touch_.touchPoint(ox_, oy_);
   const double ox = ox_, oy = oy_;
+  // (squared lengths below this have a square root well below raytrace_range, whatever the rounding)
+  const double sq_within_range = limits_.raytrace_range * limits_.raytrace_range * (1.0 - 1e-9);
   for (std::size_t pi = 0; pi < observation_.points.size(); ++pi)
   {
     const Point3& p = observation_.points[pi];
@@ -344,9 +346,11 @@ void ScanRun::clearPass()
       continue;
     }
     {
-      // costmap_2d's updateRaytraceBounds (sqrt of squares: the same value as its hypot, at a fraction of it).
+      // costmap_2d's updateRaytraceBounds (sqrt of squares: the same value as its hypot, at a fraction of it). A
+      // beam clearly within raytrace_range has scale 1 there too: no square root for it.
       const double dx = wx - ox, dy = wy - oy;
-      const double scale = std::min(1.0, limits_.raytrace_range / std::sqrt(dx * dx + dy * dy));
+      const double sq = dx * dx + dy * dy;
+      const double scale = sq < sq_within_range ? 1.0 : std::min(1.0, limits_.raytrace_range / std::sqrt(sq));
       touch_.touchPoint(ox + dx * scale, oy + dy * scale);
     }
     beam_lines_.push_back(lineSteps(x0_, y0_, x1, y1, cell_raytrace_range_));
@@ -477,7 +481,7 @@ unsigned int ScanRun::ownDeepSteps(const Beam& beam)
   // neighbour it grazed) only clears. By the beam's own range first: most beams that reach a watched cell end on it,
   // and the shadow filter can only shorten what is seen free.
   const double deep_until = (std::sqrt(pointRangeSquared(beam.point)) - watch_.free_margin) / g_.resolution;
-  return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist);
+  return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist());
 }
 
 unsigned int ScanRun::shadowDeepSteps(const Beam& beam)
@@ -492,7 +496,7 @@ unsigned int ScanRun::shadowDeepSteps(const Beam& beam)
     shadow_sq = std::min(shadow_sq, pointRangeSquared(j));
   }
   const double deep_until = (std::sqrt(shadow_sq) - watch_.free_margin) / g_.resolution;
-  return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist);
+  return stepsWithin(deep_until, beam.line.abs_da, beam.line.dist());
 }
 
 void ScanRun::walkWatched()

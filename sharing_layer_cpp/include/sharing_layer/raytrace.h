@@ -71,7 +71,13 @@ struct LineSteps
   unsigned int abs_da, abs_db;
   int sign_a, sign_b;
   unsigned int end;  ///< the last step visited: abs_da, or fewer when max_length cuts the line
-  double dist;       ///< cells from the start cell's centre to the end cell's centre
+
+  /// @return cells from the start cell's centre to the end cell's centre (sqrt of the sum of squares rather than
+  /// hypot: exact for these integer offsets, at a fraction of the cost; computed when asked, as clearing does not)
+  double dist() const
+  {
+    return std::sqrt(static_cast<double>(abs_da) * abs_da + static_cast<double>(abs_db) * abs_db);
+  }
 
   /// @return how many times the line has moved along b after i steps (bresenham2D's error term, closed form)
   unsigned int carries(unsigned int i) const
@@ -100,16 +106,15 @@ inline LineSteps lineSteps(unsigned int x0, unsigned int y0, unsigned int x1, un
   line.abs_db = line.x_major ? abs_dy : abs_dx;
   line.sign_a = signOf(line.x_major ? dx : dy);
   line.sign_b = signOf(line.x_major ? dy : dx);
-  // sqrt of the sum of squares rather than hypot: exact for these integer offsets, at a fraction of the cost
   const double dist_sq = static_cast<double>(dx) * dx + static_cast<double>(dy) * dy;
-  line.dist = std::sqrt(dist_sq);
   if (dist_sq <= static_cast<double>(max_length) * max_length)
   {
     line.end = line.abs_da;  // scale 1 below: no division for a line within max_length
   }
   else
   {
-    const double scale = (line.dist == 0.0) ? 1.0 : std::min(1.0, max_length / line.dist);
+    const double dist = line.dist();
+    const double scale = (dist == 0.0) ? 1.0 : std::min(1.0, max_length / dist);
     line.end = std::min(static_cast<unsigned int>(scale * line.abs_da), line.abs_da);
   }
   return line;
@@ -141,9 +146,15 @@ inline unsigned int stepsWithin(double distance, unsigned int abs_da, double dis
   {
     return 0;
   }
+  if (dist == 0.0)
+  {
+    return 1;
+  }
   // (1e-9: a cell exactly at the distance counts despite rounding in the caller's arithmetic)
-  const double steps = dist == 0.0 ? 1.0 : std::floor(distance * abs_da / dist + 1e-9) + 1.0;
-  return steps >= static_cast<double>(UINT_MAX) ? UINT_MAX : static_cast<unsigned int>(steps);
+  const double before = distance * abs_da / dist + 1e-9;
+  // The conversion truncates, which for this non-negative value is floor (std::floor is a libm call on x86-64's
+  // baseline, once per beam the walk reaches).
+  return before >= static_cast<double>(UINT_MAX - 1u) ? UINT_MAX : static_cast<unsigned int>(before) + 1u;
 }
 
 /// @brief Action that writes one value into every visited cell (costmap_2d's MarkCell).
