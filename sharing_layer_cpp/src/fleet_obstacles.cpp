@@ -67,10 +67,17 @@ void forEachIn(const std::vector<std::uint32_t>& sorted, const CellRect& r, cons
 {
   const std::uint32_t first = g.getIndex(static_cast<unsigned int>(r.min_x), static_cast<unsigned int>(r.min_y));
   const std::uint32_t last = g.getIndex(static_cast<unsigned int>(r.max_x), static_cast<unsigned int>(r.max_y));
+  // The row's columns in index terms, moved on row by row as the sorted cells pass them (no division per cell).
+  std::uint32_t row_first = first, row_last = g.getIndex(static_cast<unsigned int>(r.max_x),
+                                                          static_cast<unsigned int>(r.min_y));
   for (auto it = std::lower_bound(sorted.begin(), sorted.end(), first); it != sorted.end() && *it <= last; ++it)
   {
-    const int x = static_cast<int>(*it % g.size_x);
-    if (x >= r.min_x && x <= r.max_x)
+    while (*it > row_last)
+    {
+      row_first += g.size_x;
+      row_last += g.size_x;
+    }
+    if (*it >= row_first)
     {
       f(*it);
     }

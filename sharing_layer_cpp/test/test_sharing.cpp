@@ -232,6 +232,20 @@ TEST(Monitoring, ObstaclesOutOfRangeAreNotTouched)
   EXPECT_EQ((std::vector<std::uint32_t>{ cell(38, 38) }), core.sharedCells("far"));
 }
 
+TEST(Monitoring, ACellMarkedInOneObstacleIsNotAnotherSideBySideInTheSameRows)
+{
+  // Two obstacles in the same rows, west at columns 16-21 and east at 25-29: a cell marked in east's rectangle
+  // lies between west's first and last cell in index order, and must not become west's.
+  SharingCore core(grid40(), params());
+  ASSERT_TRUE(core.applyShared(share("west", { cell(18, 18), cell(18, 19) }, Subsection(1.6, 1.6, 2.1, 2.4)), 0.0).ok);
+  ASSERT_TRUE(core.applyShared(share("east", { cell(28, 18), cell(28, 19) }, Subsection(2.5, 1.6, 3.0, 2.4)), 0.0).ok);
+  const ScanOutcome outcome = core.processScan(scan(centre(27, 37), { centre(27, 20) }), 1.0);
+  ASSERT_EQ(1u, outcome.updates.size());
+  EXPECT_EQ("east", outcome.updates[0].uuid);
+  EXPECT_EQ((std::vector<std::uint32_t>{ cell(27, 20) }), outcome.updates[0].marked);
+  EXPECT_EQ((std::vector<std::uint32_t>{ cell(18, 18), cell(18, 19) }), core.sharedCells("west"));
+}
+
 TEST(Overlay, SharedCellsAreDrawnAloneAndSurviveTheObstacleReset)
 {
   SharingCore core(grid40(), params());
