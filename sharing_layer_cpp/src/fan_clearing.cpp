@@ -24,6 +24,9 @@ constexpr std::uint32_t kMaxReciprocalLength = 16384;
 /// ... on grids up to this wide: b * row is one 16-bit multiply (pmaddwd).
 constexpr int kMaxReciprocalRow = 32767;
 
+/// Lines longer than this along a are not grouped (no grid holds them: a bound for the arithmetic of closeTo).
+constexpr std::uint64_t kMaxRunLength = std::uint64_t{ 1 } << 24;
+
 /// Runs shorter than this are raytraced beam by beam: the fill's per-step work would cost more than it saves.
 constexpr std::size_t kMinRun = 3;
 
@@ -83,6 +86,10 @@ private:
   static bool closeTo(const RunBeam& j, const LineSteps& k)
   {
     const std::uint64_t aj = j.A, bj = j.B, ak = k.abs_da, bk = k.abs_db;
+    if (std::max(aj, ak) > kMaxRunLength)
+    {
+      return false;  // (the products below stay far inside 64 bits)
+    }
     const std::uint64_t cross = bk * aj > bj * ak ? bk * aj - bj * ak : bj * ak - bk * aj;
     return 2 * static_cast<std::uint64_t>(kNearSteps) * cross + std::max(aj, ak) < 2 * aj * ak;
   }

@@ -154,7 +154,7 @@ inline unsigned int stepsWithin(double distance, unsigned int abs_da, double dis
   const double before = distance * abs_da / dist + 1e-9;
   // The conversion truncates, which for this non-negative value is floor (std::floor is a libm call on x86-64's
   // baseline, once per beam the walk reaches).
-  return before >= static_cast<double>(UINT_MAX - 1u) ? UINT_MAX : static_cast<unsigned int>(before) + 1u;
+  return !(before < static_cast<double>(UINT_MAX - 1u)) ? UINT_MAX : static_cast<unsigned int>(before) + 1u;
 }
 
 /// @brief Action that writes one value into every visited cell (costmap_2d's MarkCell).
