@@ -12,12 +12,6 @@ namespace sharing_layer
 {
 namespace
 {
-/// A beam of a run: its slope B / A and starting error term h, as bresenham2D steps it.
-struct RunBeam
-{
-  std::uint32_t A, B, h;
-};
-
 /// Lines up to this long along a are stepped by multiplying with the reciprocal of their length (raytraceSse2): the
 /// numerators h + s B stay below 2^30, which the reciprocal's precision needs.
 constexpr std::uint32_t kMaxReciprocalLength = 16384;
@@ -30,10 +24,11 @@ constexpr std::uint64_t kMaxRunLength = std::uint64_t{ 1 } << 24;
 /// Runs shorter than this are raytraced beam by beam: the fill's per-step work would cost more than it saves.
 constexpr std::size_t kMinRun = 3;
 
-/// -1, 0, 1 as B_j / A_j is below, equal to, above B_k / A_k
-int compareSlope(const RunBeam& j, const RunBeam& k)
+/// -1, 0, 1 as line j's slope abs_db / abs_da is below, equal to, above line k's
+int compareSlope(const LineSteps& j, const LineSteps& k)
 {
-  const std::uint64_t l = static_cast<std::uint64_t>(j.B) * k.A, r = static_cast<std::uint64_t>(k.B) * j.A;
+  const std::uint64_t l = static_cast<std::uint64_t>(j.abs_db) * k.abs_da;
+  const std::uint64_t r = static_cast<std::uint64_t>(k.abs_db) * j.abs_da;
   return (l > r) - (l < r);
 }
 
@@ -54,7 +49,6 @@ public:
   FanStats run(const std::vector<LineSteps>& lines)
   {
     run_.clear();
-    run_lines_.clear();
     int run_octant = -1;
     for (const LineSteps& line : lines)
     {
@@ -64,13 +58,12 @@ public:
         continue;
       }
       const int o = octant(line);
-      if (o != run_octant || !closeTo(run_.back(), line))
+      if (o != run_octant || !closeTo(*run_.back(), line))
       {
         flush();
         run_octant = o;
       }
-      run_.push_back(RunBeam{ line.abs_da, line.abs_db, line.abs_da / 2 });
-      run_lines_.push_back(&line);
+      run_.push_back(&line);
       if (line.end > kNearSteps)
       {
         raytrace(line, kNearSteps + 1, line.end);
@@ -83,9 +76,9 @@ public:
 private:
   /// Whether beam k's line stays within one cell of the run's last beam j along b over the near steps:
   /// kNearSteps |B_k / A_k - B_j / A_j| + 1 / (2 min(A_j, A_k)) < 1, times 2 A_j A_k.
-  static bool closeTo(const RunBeam& j, const LineSteps& k)
+  static bool closeTo(const LineSteps& j, const LineSteps& k)
   {
-    const std::uint64_t aj = j.A, bj = j.B, ak = k.abs_da, bk = k.abs_db;
+    const std::uint64_t aj = j.abs_da, bj = j.abs_db, ak = k.abs_da, bk = k.abs_db;
     if (std::max(aj, ak) > kMaxRunLength)
     {
       return false;  // (the products below stay far inside 64 bits)
@@ -209,12 +202,11 @@ private:
     }
     if (run_.size() < kMinRun)
     {
-      for (const LineSteps* line : run_lines_)
+      for (const LineSteps* line : run_)
       {
         raytrace(*line, 0, std::min(line->end, kNearSteps));
       }
       run_.clear();
-      run_lines_.clear();
       return;
     }
     ++stats_.groups;
@@ -224,13 +216,14 @@ private:
     std::size_t steepest = 0, flattest = 0;
     for (std::size_t k = 1; k < run_.size(); ++k)
     {
-      steepest = compareSlope(run_[k], run_[steepest]) > 0 ? k : steepest;
-      flattest = compareSlope(run_[k], run_[flattest]) < 0 ? k : flattest;
+      steepest = compareSlope(*run_[k], *run_[steepest]) > 0 ? k : steepest;
+      flattest = compareSlope(*run_[k], *run_[flattest]) < 0 ? k : flattest;
     }
-    const RunBeam top = run_[steepest], bottom = run_[flattest];
-    const std::ptrdiff_t step_a = stepA(*run_lines_.front());
-    const std::ptrdiff_t step_b = stepB(*run_lines_.front());
-    std::uint32_t top_error = top.h, bottom_error = bottom.h;
+    const LineSteps& top = *run_[steepest];
+    const LineSteps& bottom = *run_[flattest];
+    const std::ptrdiff_t step_a = stepA(top);  // (the run's lines share their octant)
+    const std::ptrdiff_t step_b = stepB(top);
+    std::uint32_t top_error = top.abs_da / 2, bottom_error = bottom.abs_da / 2;  // as bresenham2D starts
     std::uint32_t top_b = 0, bottom_b = 0;
     std::size_t column = origin_;  // the cell at step s, b = 0
     for (unsigned int s = 0; s <= kNearSteps; ++s)
@@ -243,21 +236,20 @@ private:
       }
       stats_.near_cells += top_b - bottom_b + 1;
       column += static_cast<std::size_t>(step_a);
-      top_error += top.B;
-      if (top_error >= top.A)
+      top_error += top.abs_db;
+      if (top_error >= top.abs_da)
       {
-        top_error -= top.A;
+        top_error -= top.abs_da;
         ++top_b;
       }
-      bottom_error += bottom.B;
-      if (bottom_error >= bottom.A)
+      bottom_error += bottom.abs_db;
+      if (bottom_error >= bottom.abs_da)
       {
-        bottom_error -= bottom.A;
+        bottom_error -= bottom.abs_da;
         ++bottom_b;
       }
     }
     run_.clear();
-    run_lines_.clear();
   }
 
   std::uint8_t* costs_;
@@ -265,14 +257,12 @@ private:
   std::size_t origin_;
   std::uint8_t value_;
   FanStats stats_;
-  std::vector<RunBeam>& run_ = scratch().run;
-  std::vector<const LineSteps*>& run_lines_ = scratch().lines;
+  std::vector<const LineSteps*>& run_ = scratch().run;  ///< the run being gathered, in scan order
 
   /// Kept from fan to fan (per thread), so that a scan does not allocate them again.
   struct Scratch
   {
-    std::vector<RunBeam> run;
-    std::vector<const LineSteps*> lines;
+    std::vector<const LineSteps*> run;
   };
   static Scratch& scratch()
   {

@@ -23,22 +23,33 @@ namespace
 constexpr std::uint8_t kUntouched = 7;
 constexpr std::uint8_t kCleared = 0;
 
+/// Lines from one start cell, kept both as raytraceLine's arguments (the reference) and as clearFan's input.
 struct Fan
 {
   unsigned int size_x = 0, size_y = 0, x0 = 0, y0 = 0;
+  struct End
+  {
+    unsigned int x1, y1, max_length;
+  };
+  std::vector<End> ends;
   std::vector<LineSteps> lines;
+
+  /// A line from (x0, y0) to (x1, y1), cut to max_length cells.
+  void to(unsigned int x1, unsigned int y1, unsigned int max_length = UINT_MAX)
+  {
+    ends.push_back(End{ x1, y1, max_length });
+    lines.push_back(lineSteps(x0, y0, x1, y1, max_length));
+  }
 };
 
+/// The reference: raytraceLine, costmap_2d's semantics (test_raytrace), beam by beam.
 std::vector<std::uint8_t> beamByBeam(const Fan& fan)
 {
   std::vector<std::uint8_t> grid(static_cast<std::size_t>(fan.size_x) * fan.size_y, kUntouched);
-  sharing_layer::SetCellAction clear{ grid.data(), kCleared };
-  const int row = static_cast<int>(fan.size_x);
-  for (const LineSteps& l : fan.lines)
+  const sharing_layer::SetCellAction clear{ grid.data(), kCleared };
+  for (const Fan::End& end : fan.ends)
   {
-    sharing_layer::bresenham2D(clear, l.abs_da, l.abs_db, static_cast<int>(l.abs_da / 2),
-                               l.x_major ? l.sign_a : l.sign_a * row, l.x_major ? l.sign_b * row : l.sign_b,
-                               fan.y0 * fan.size_x + fan.x0, l.end);
+    sharing_layer::raytraceLine(clear, fan.x0, fan.y0, end.x1, end.y1, fan.size_x, end.max_length);
   }
   return grid;
 }
@@ -88,8 +99,7 @@ Fan randomFan(std::mt19937& rng, unsigned int beams, double span, double first, 
                                         static_cast<int>(std::lround(fan.x0 + range * std::cos(angle)))));
     const int ey = std::max(0, std::min(static_cast<int>(fan.size_y) - 1,
                                         static_cast<int>(std::lround(fan.y0 + range * std::sin(angle)))));
-    fan.lines.push_back(lineSteps(fan.x0, fan.y0, static_cast<unsigned int>(ex), static_cast<unsigned int>(ey),
-                                  max_length));
+    fan.to(static_cast<unsigned int>(ex), static_cast<unsigned int>(ey), max_length);
   }
   return fan;
 }
@@ -130,7 +140,7 @@ TEST(FanClearing, TheReferenceScanIsFilledNearTheSensorAndEqualToRaytracing)
   {
     unsigned int x1 = 0, y1 = 0;
     ASSERT_TRUE(g.worldToMap(p.x, p.y, x1, y1));
-    fan.lines.push_back(lineSteps(fan.x0, fan.y0, x1, y1, g.cellDistance(30.0)));
+    fan.to(x1, y1, g.cellDistance(30.0));
   }
   FanStats stats;
   EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
@@ -153,7 +163,7 @@ TEST(FanClearing, EveryOctantAndTheAxesBetweenThem)
       const double angle = k * M_PI / 8.0 + i * 0.002;
       const int ex = std::max(0, std::min(300, static_cast<int>(std::lround(150 + 200 * std::cos(angle)))));
       const int ey = std::max(0, std::min(300, static_cast<int>(std::lround(150 + 200 * std::sin(angle)))));
-      fan.lines.push_back(lineSteps(150, 150, static_cast<unsigned int>(ex), static_cast<unsigned int>(ey)));
+      fan.to(static_cast<unsigned int>(ex), static_cast<unsigned int>(ey));
     }
     FanStats stats;
     EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats))) << "direction " << k;
@@ -171,8 +181,8 @@ TEST(FanClearing, EqualSlopesWithOddAndEvenLengthsStartDifferently)
   fan.x0 = fan.y0 = 10;
   for (unsigned int n = 22; n < 120; ++n)
   {
-    fan.lines.push_back(lineSteps(10, 10, 10 + 3 * n, 10 + n));
-    fan.lines.push_back(lineSteps(10, 10, 10 + 3 * n + 1, 10 + n));
+    fan.to(10 + 3 * n, 10 + n);
+    fan.to(10 + 3 * n + 1, 10 + n);
   }
   FanStats stats;
   EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
@@ -185,10 +195,10 @@ TEST(FanClearing, ShortAndZeroLengthLinesAreRaytracedAlone)
   fan.size_x = fan.size_y = 50;
   fan.x0 = 20;
   fan.y0 = 30;
-  fan.lines.push_back(lineSteps(20, 30, 20, 30));  // the start cell only
-  fan.lines.push_back(lineSteps(20, 30, 25, 31));
-  fan.lines.push_back(lineSteps(20, 30, 0, 0));
-  fan.lines.push_back(lineSteps(20, 30, 49, 49, 10));  // cut to 10 cells
+  fan.to(20, 30);  // the start cell only
+  fan.to(25, 31);
+  fan.to(0, 0);
+  fan.to(49, 49, 10);  // cut to 10 cells
   FanStats stats;
   EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
   EXPECT_EQ(0u, stats.groups);
@@ -217,10 +227,10 @@ TEST(FanClearing, LongLinesAndWideGridsAroundTheReciprocalLimits)
     {
       for (const unsigned int y1 : { 0u, 1u, 3u, 5u, 6u })
       {
-        fan.lines.push_back(lineSteps(1, 3, 1 + length, y1));
+        fan.to(1 + length, y1);
       }
     }
-    fan.lines.push_back(lineSteps(1, 3, 1 + 16384, 6, 9000));  // cut
+    fan.to(1 + 16384, 6, 9000);  // cut
     EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan))) << size_x << " cells wide";
   }
   // And along y: a tall, narrow grid.
@@ -233,7 +243,7 @@ TEST(FanClearing, LongLinesAndWideGridsAroundTheReciprocalLimits)
   {
     for (const unsigned int x1 : { 0u, 1u, 3u, 4u })
     {
-      fan.lines.push_back(lineSteps(2, 19990, x1, 19990 - length));
+      fan.to(x1, 19990 - length);
     }
   }
   EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan)));
