@@ -82,6 +82,7 @@ struct ScanScratch
   std::vector<std::uint32_t> seen_cells;
   std::vector<double> range_sq;
   std::vector<LineSteps> beam_lines;
+  std::vector<std::uint32_t> sort_buffer;
 };
 
 ScanScratch& scanScratch()
@@ -90,9 +91,50 @@ ScanScratch& scanScratch()
   return scratch;
 }
 
-void sortUnique(std::vector<std::uint32_t>& cells)
+/// Sorts cell indexes below `bound` and drops duplicates. A 30 m scan marks a thousand cells: a least-significant-digit
+/// radix sort takes two passes of 11 bits over them on a grid of 4 M cells, about a third of std::sort's time at
+/// -O2 (issue 29). Short lists go to std::sort.
+void sortUnique(std::vector<std::uint32_t>& cells, std::size_t bound, std::vector<std::uint32_t>& scratch)
 {
-  std::sort(cells.begin(), cells.end());
+  constexpr std::size_t kMinRadix = 256;
+  if (cells.size() >= kMinRadix)
+  {
+    constexpr int kDigitBits = 11;
+    constexpr std::uint32_t kDigits = 1u << kDigitBits;
+    const std::uint64_t largest = bound == 0 ? 0 : bound - 1;
+    scratch.resize(cells.size());
+    std::uint32_t* from = cells.data();
+    std::uint32_t* to = scratch.data();
+    const std::size_t n = cells.size();
+    for (int shift = 0; shift < 32 && (largest >> shift) != 0; shift += kDigitBits)
+    {
+      std::uint32_t start[kDigits] = {};
+      for (std::size_t i = 0; i < n; ++i)
+      {
+        ++start[(from[i] >> shift) & (kDigits - 1)];
+      }
+      std::uint32_t sum = 0;
+      for (std::uint32_t& d : start)
+      {
+        const std::uint32_t count = d;
+        d = sum;
+        sum += count;
+      }
+      for (std::size_t i = 0; i < n; ++i)
+      {
+        to[start[(from[i] >> shift) & (kDigits - 1)]++] = from[i];
+      }
+      std::swap(from, to);
+    }
+    if (from != cells.data())
+    {
+      std::copy(from, from + n, cells.data());
+    }
+  }
+  else
+  {
+    std::sort(cells.begin(), cells.end());
+  }
   cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
 }
 }  // namespace
@@ -155,7 +197,9 @@ public:
     oy_ = observation_.origin.y;
     touch_.origin_in_map = std::isfinite(observation_.origin.z) && g_.worldToMap(ox_, oy_, x0_, y0_);
     cell_raytrace_range_ = g_.cellDistance(limits_.raytrace_range);
-    scan_detail::BeamIndex beams(watching_ ? observation_.points.size() : 0, x0_, y0_, cell_raytrace_range_);
+    scan_detail::BeamIndex beams(watching_ ? observation_.points.size() : 0, x0_, y0_, cell_raytrace_range_,
+                                 watch_.regions.size() + watch_.loose_cells.size() +
+                                     (watch_.regions.empty() ? watch_.cells.size() : 0));
     beams_ = &beams;
     clearing_ = touch_.origin_in_map && limits_.clearing;
     if (clearing_)
@@ -174,7 +218,7 @@ public:
         usable(p, limits_, touch_);
       }
     }
-    sortUnique(touch_.marked);
+    sortUnique(touch_.marked, g_.cellCount(), scanScratch().sort_buffer);
     readBack();
     if (watching_)
     {
@@ -353,7 +397,7 @@ void ScanRun::clearPass()
       const double scale = sq < sq_within_range ? 1.0 : std::min(1.0, limits_.raytrace_range / std::sqrt(sq));
       touch_.touchPoint(ox + dx * scale, oy + dy * scale);
     }
-    beam_lines_.push_back(lineSteps(x0_, y0_, x1, y1, cell_raytrace_range_));
+    beam_lines_.emplace_back(x0_, y0_, x1, y1, cell_raytrace_range_);
     if (watching_)
     {
       beams_->add(pi, x1, y1, clipped);

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <stdexcept>
 #include <limits>
+#include <random>
+#include <set>
 
 #include "ascii_grid.h"
 #include "sharing_layer/cost_values.h"
@@ -320,4 +322,37 @@ TEST(ApplyScan, PointsAboveTheMarkingHeightClearButAreNotMarked)
   EXPECT_EQ(std::vector<std::uint32_t>{ 1 * 12 + 3 }, touch.marked);
   limits.max_marking_height = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(applyScan(grid, obs, limits), std::invalid_argument);
+}
+
+// A long scan marks its cells in scan order, with repeats; touch.marked lists them sorted and once each, whatever the
+// grid's size (the sort works by digits of the cell index: one to three of them on the grids below).
+TEST(ApplyScan, ManyMarkedCellsComeOutSortedAndUniqueOnGridsOfEverySize)
+{
+  for (const unsigned int side : { 40u, 700u, 3000u })  // 1,600, 490,000 and 9 M cells
+  {
+    const GridGeometry geometry(0.05, 0.0, 0.0, side, side);
+    CostGrid grid(geometry, FREE_SPACE);
+    std::mt19937 random(side);
+    std::uniform_real_distribution<double> coordinate(0.0, side * 0.05);
+    Observation obs;
+    obs.origin = Point3{ 0.5 * side * 0.05, 0.5 * side * 0.05, 0.0 };
+    std::set<std::uint32_t> expected;
+    for (int i = 0; i < 3000; ++i)
+    {
+      // Every third point falls in the cell of an earlier one.
+      const Point3 p = i % 3 == 2 ? obs.points[random() % obs.points.size()]
+                                  : Point3{ coordinate(random), coordinate(random), 0.0 };
+      obs.points.push_back(p);
+      unsigned int mx = 0, my = 0;
+      ASSERT_TRUE(geometry.worldToMap(p.x, p.y, mx, my));
+      expected.insert(geometry.getIndex(mx, my));
+    }
+    ScanLimits l;
+    l.obstacle_range = 1e9;
+    l.raytrace_range = 1.0;
+    const ScanTouch touch = applyScan(grid, obs, l);
+    EXPECT_EQ(std::vector<std::uint32_t>(expected.begin(), expected.end()), touch.marked) << side << " x " << side;
+    EXPECT_GT(obs.points.size(), expected.size()) << "the scan repeats cells";
+    EXPECT_GE(expected.size(), 256u) << "enough cells for the digit sort";
+  }
 }
