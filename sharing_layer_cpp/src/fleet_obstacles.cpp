@@ -279,11 +279,26 @@ bool FleetObstacles::monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence
   marked_.clear();
   cleared_.clear();
   seen_again_.clear();
+  // The evidence comes in index order, so the obstacle's present cells (sorted too) are looked up by a cursor moving
+  // forward with it: with obstacle_range as long as raytrace_range, every face in view is marked again on every
+  // scan, and a hash lookup per cell was a tenth of the 30 m scan pass (issue 29).
+  // (fetched when first needed: most obstacles in view get no evidence from a scan)
+  const std::vector<std::uint32_t>* present = nullptr;
+  std::vector<std::uint32_t>::const_iterator next_present;
+  const auto is_present = [&](std::uint32_t index) {
+    if (present == nullptr)
+    {
+      present = &obstacle.cells.present();
+      next_present = present->begin();
+    }
+    next_present = std::lower_bound(next_present, present->end(), index);
+    return next_present != present->end() && *next_present == index;
+  };
   forEachIn(evidence.marked_watched, r, g, [&](std::uint32_t index) {
     // Walls, and a fleet robot standing on the cell: neither new cells nor an observation of the obstacle.
     if (!rules.statics.isStatic(index) && !rules.robots.excludes(index))
     {
-      (obstacle.cells.isPresent(index) ? seen_again_ : marked_).push_back(index);
+      (is_present(index) ? seen_again_ : marked_).push_back(index);
     }
   });
   // A sign of occupancy: the evidence of free space starts again.
@@ -294,8 +309,12 @@ bool FleetObstacles::monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence
   // Evidence of free space: a beam through the cell ending well beyond it. One scan is not enough (a beam grazing
   // along a face through the free part of its cells, localisation jitter): an unbroken streak of clearing_scans
   // scans over clearing_time clears the cell. (occupied and seen_free share no cell.)
+  if (present != nullptr)
+  {
+    next_present = present->begin();
+  }
   forEachIn(evidence.seen_free, r, g, [&](std::uint32_t index) {
-    if (obstacle.cells.isPresent(index) &&
+    if (is_present(index) &&
         obstacle.free_streaks[index].add(now_s, params.clearing_scans, params.clearing_time))
     {
       obstacle.free_streaks.erase(index);

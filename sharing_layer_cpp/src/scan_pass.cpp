@@ -88,6 +88,11 @@ void ScanPass::collectNewMarks(const Observation& observation, const ScanLimits&
   const GridGeometry& g = parts.grid.geometry();
   std::vector<ScanWatch::Cell>& cells = watch_.point_cells;
   cells.resize(observation.points.size());
+  const bool new_marks = parts.plan_set && l.marking;  // a source that does not mark makes nothing new
+  const double ox = observation.origin.x;
+  const double oy = observation.origin.y;
+  const double sq_range = l.obstacle_range * l.obstacle_range;
+  const double sq_far = l.raytrace_range * l.raytrace_range;
   for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
   {
     const Point3& p = observation.points[pi];
@@ -96,23 +101,11 @@ void ScanPass::collectNewMarks(const Observation& observation, const ScanLimits&
         p.z > l.max_obstacle_height || !g.worldToMap(p.x, p.y, cell.x, cell.y))
     {
       cell.x = ScanWatch::kNoCell;
-    }
-  }
-  if (!parts.plan_set || !l.marking)  // a source that does not mark makes nothing new
-  {
-    return;
-  }
-  const double ox = observation.origin.x;
-  const double oy = observation.origin.y;
-  const double sq_range = l.obstacle_range * l.obstacle_range;
-  const double sq_far = l.raytrace_range * l.raytrace_range;
-  for (std::size_t pi = 0; pi < observation.points.size(); ++pi)
-  {
-    const Point3& p = observation.points[pi];
-    const ScanWatch::Cell cell = cells[pi];
-    if (cell.x == ScanWatch::kNoCell)
-    {
       continue;  // unusable, or off the grid
+    }
+    if (!new_marks)
+    {
+      continue;
     }
     const double dz = p.z - observation.origin.z;
     const double d_sq = (p.x - ox) * (p.x - ox) + (p.y - oy) * (p.y - oy) + dz * dz;
