@@ -55,15 +55,14 @@ void ObservedCells::watchRemembered(double now_s, double trigger_memory, const G
   }
 }
 
-void ObservedCells::track(const ScanTouch& touch, const GridGeometry& g, double ox, double oy, double obstacle_range,
-                          const CostGrid& grid, const ShareRules& rules, CellFlags& flags)
+void ObservedCells::track(const std::vector<std::uint32_t>& unclaimed, const GridGeometry& g, double ox, double oy,
+                          double obstacle_range, const CostGrid& grid, CellFlags& flags)
 {
-  for (std::uint32_t index : touch.marked)
+  for (std::uint32_t index : unclaimed)
   {
     // Cells marked on a fleet robot do not become shareable (nor stay so when it drives on); an obstacle
     // beside it becomes shareable with the next scan that marks it after the robot left.
-    if (!flags.has(index, CellFlags::kShareable) && !rules.statics.isStatic(index) && !rules.monitored.test(index) &&
-        !rules.robots.excludes(index))
+    if (!flags.has(index, CellFlags::kShareable))
     {
       flags.set(index, CellFlags::kShareable);
       shareable_.push_back(index);
@@ -89,9 +88,9 @@ void ObservedCells::track(const ScanTouch& touch, const GridGeometry& g, double 
   shareable_.erase(keep_end, shareable_.end());
 }
 
-void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, float sensor_x,
-                             float sensor_y, double now_s, double trigger_memory, unsigned int clearing_scans,
-                             double clearing_time, const ShareRules& rules, CellFlags& flags)
+void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint32_t>& off_walls,
+                             const std::vector<std::uint32_t>& occupied, float sensor_x, float sensor_y, double now_s,
+                             double trigger_memory, unsigned int clearing_scans, double clearing_time, CellFlags& flags)
 {
   if (trigger_memory <= 0.0 || !std::isfinite(now_s))
   {
@@ -127,23 +126,20 @@ void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint
       found->second.marks = 0;  // a beam passed through it: not marked steadily
     }
   }
-  for (std::uint32_t index : touch.marked)
+  // (A cell marked on a fleet robot is not remembered: its trail must not be proposed once it drove on.)
+  for (std::uint32_t index : off_walls)
   {
-    // A cell marked on a fleet robot is not remembered: its trail must not be proposed once it drove on.
-    if (!rules.statics.isStatic(index) && !rules.robots.excludes(index))
+    RememberedCell& cell = memory_[index];
+    flags.set(index, CellFlags::kRemembered);
+    if (cell.marks == 0)
     {
-      RememberedCell& cell = memory_[index];
-      flags.set(index, CellFlags::kRemembered);
-      if (cell.marks == 0)
-      {
-        cell.marked_since = now_s;
-      }
-      cell.marks = static_cast<std::uint16_t>(std::min<int>(cell.marks + 1, 0xFFFF));
-      cell.time = now_s;
-      cell.sensor_x = sensor_x;
-      cell.sensor_y = sensor_y;
-      cell.free.reset();
+      cell.marked_since = now_s;
     }
+    cell.marks = static_cast<std::uint16_t>(std::min<int>(cell.marks + 1, 0xFFFF));
+    cell.time = now_s;
+    cell.sensor_x = sensor_x;
+    cell.sensor_y = sensor_y;
+    cell.free.reset();
   }
 }
 

@@ -33,13 +33,14 @@ ScanOutcome ScanPass::run(const Observation& observation, double now_s, const Sc
   outcome.touch = applyScan(parts.grid, observation, limits, watch_);
   const ShareRules rules{ parts.statics, parts.fleet.monitoredCells(), parts.robots };
   const GridGeometry& g = parts.grid.geometry();
-  parts.observed.track(outcome.touch, g, observation.origin.x, observation.origin.y, limits.obstacle_range,
-                       parts.grid, rules, parts.flags);
-  collectSigns(outcome.touch, parts);
-  parts.observed.remember(outcome.touch, occupied_, static_cast<float>(observation.origin.x),
+  sortMarked(outcome.touch, parts);
+  parts.observed.track(unclaimed_, g, observation.origin.x, observation.origin.y, limits.obstacle_range, parts.grid,
+                       parts.flags);
+  collectSigns(outcome.touch);
+  parts.observed.remember(outcome.touch, off_walls_, occupied_, static_cast<float>(observation.origin.x),
                           static_cast<float>(observation.origin.y), now_s, parts.params.trigger_memory,
-                          parts.params.clearing_scans, parts.params.clearing_time, rules, parts.flags);
-  summarise(observation, outcome.touch, now_s, parts);
+                          parts.params.clearing_scans, parts.params.clearing_time, parts.flags);
+  summarise(observation, now_s, parts);
   if (!in_view_.empty())
   {
     monitorInView(outcome.touch, now_s, parts, rules, outcome.updates);
@@ -128,23 +129,52 @@ void ScanPass::collectNewMarks(const Observation& observation, const ScanLimits&
   }
 }
 
-void ScanPass::collectSigns(const ScanTouch& t, ScanParts& parts)
+void ScanPass::sortMarked(const ScanTouch& touch, ScanParts& parts)
+{
+  last_.static_marked = 0;
+  last_.robot_marked.clear();
+  marked_watched_.clear();
+  marked_known_.clear();
+  unclaimed_.clear();
+  off_walls_.clear();
+  for (std::uint32_t index : touch.marked)
+  {
+    const bool is_static = parts.statics.isStatic(index);
+    const bool monitored = parts.fleet.monitored(index);
+    const bool on_robot = parts.robots.excludes(index);
+    last_.static_marked += is_static;
+    if (on_robot && !is_static)
+    {
+      last_.robot_marked.push_back(index);
+    }
+    if (monitored)
+    {
+      marked_watched_.push_back(index);
+    }
+    if (monitored || parts.flags.has(index, CellFlags::kRemembered))
+    {
+      marked_known_.push_back(index);
+    }
+    if (!is_static && !on_robot)
+    {
+      off_walls_.push_back(index);
+      if (!monitored)
+      {
+        unclaimed_.push_back(index);
+      }
+    }
+  }
+}
+
+void ScanPass::collectSigns(const ScanTouch& t)
 {
   // Signs of occupancy among the watched cells: marked, an endpoint in it beyond obstacle_range, or cleared by a
   // beam that ended close behind it (the face it hit, or a neighbour it grazed). Every list is sorted: merged, not
   // sorted again.
   occupied_.clear();
   grazed_.clear();
-  marked_known_.clear();
   std::set_difference(t.watched_cleared.begin(), t.watched_cleared.end(), t.watched_free.begin(),
                       t.watched_free.end(), std::back_inserter(grazed_));
-  for (std::uint32_t index : t.marked)
-  {
-    if (parts.fleet.monitored(index) || parts.flags.has(index, CellFlags::kRemembered))
-    {
-      marked_known_.push_back(index);
-    }
-  }
   signs_.clear();
   std::set_union(grazed_.begin(), grazed_.end(), t.watched_hit.begin(), t.watched_hit.end(),
                  std::back_inserter(signs_));
@@ -152,23 +182,13 @@ void ScanPass::collectSigns(const ScanTouch& t, ScanParts& parts)
                  std::back_inserter(occupied_));
 }
 
-void ScanPass::summarise(const Observation& observation, const ScanTouch& touch, double now_s, ScanParts& parts)
+void ScanPass::summarise(const Observation& observation, double now_s, ScanParts& parts)
 {
   last_.time = now_s;
   if (std::isfinite(observation.origin.x) && std::isfinite(observation.origin.y))
   {
     last_.origin_x = observation.origin.x;
     last_.origin_y = observation.origin.y;
-  }
-  last_.static_marked = 0;
-  last_.robot_marked.clear();
-  for (std::uint32_t index : touch.marked)
-  {
-    last_.static_marked += parts.statics.isStatic(index);
-    if (parts.robots.excludes(index) && !parts.statics.isStatic(index))
-    {
-      last_.robot_marked.push_back(index);
-    }
   }
   last_.new_marked.clear();
   for (std::uint32_t index : not_lethal_before_)
@@ -186,14 +206,6 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
                              std::vector<ObstacleUpdate>& updates)
 {
   const GridGeometry& g = parts.grid.geometry();
-  marked_watched_.clear();
-  for (std::uint32_t index : touch.marked)
-  {
-    if (parts.fleet.monitored(index))
-    {
-      marked_watched_.push_back(index);
-    }
-  }
   // Growth candidates, computed once per scan. They lie within obstacle_range of the robot, most obstacles in view
   // far beyond: their box rules those out without looking at their rings.
   parts.observed.steadyShareable(parts.params.clearing_scans, parts.params.clearing_time, parts.flags, steady_);

@@ -75,18 +75,20 @@ public:
    */
   void watchRemembered(double now_s, double trigger_memory, const GridGeometry& g, bool origin_finite, double ox,
                        double oy, double reach_sq, CellFlags& flags, std::vector<std::uint32_t>& in_reach);
-  /// @brief Cells the scan marked become shareable where the rules allow; cells cleared on the grid or beyond
-  /// obstacle_range of the origin stop being shareable.
-  void track(const ScanTouch& touch, const GridGeometry& g, double ox, double oy, double obstacle_range,
-             const CostGrid& grid, const ShareRules& rules, CellFlags& flags);
+  /// @brief The scan's marked cells that the rules leave to this robot (not static, not in a shared obstacle's
+  /// rectangle, not on a fleet robot: `unclaimed`, sorted out by the caller) become shareable; cells cleared on the
+  /// grid or beyond obstacle_range of the origin stop being shareable.
+  void track(const std::vector<std::uint32_t>& unclaimed, const GridGeometry& g, double ox, double oy,
+             double obstacle_range, const CostGrid& grid, CellFlags& flags);
   /**
    * @brief The trigger memory after a scan: `occupied` (signs of occupancy) restarts a cell's evidence of free
    * space, watched_free adds to it (enough of it forgets the cell), watched_cleared ends its row of marks, and
-   * every marked non-static cell off the fleet robots is remembered, with the sensor position.
+   * `off_walls` (the marked cells neither static nor on a fleet robot, sorted out by the caller) are remembered, with
+   * the sensor position.
    */
-  void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& occupied, float sensor_x, float sensor_y,
-                double now_s, double trigger_memory, unsigned int clearing_scans, double clearing_time,
-                const ShareRules& rules, CellFlags& flags);
+  void remember(const ScanTouch& touch, const std::vector<std::uint32_t>& off_walls,
+                const std::vector<std::uint32_t>& occupied, float sensor_x, float sensor_y, double now_s,
+                double trigger_memory, unsigned int clearing_scans, double clearing_time, CellFlags& flags);
   /// @brief Shareable cells marked steadily (in clearing_scans scans in a row over clearing_time): growth candidates
   /// of shared obstacles, into `steady`.
   void steadyShareable(unsigned int clearing_scans, double clearing_time, const CellFlags& flags,
