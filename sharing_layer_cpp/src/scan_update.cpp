@@ -82,7 +82,6 @@ struct ScanScratch
   std::vector<std::uint32_t> seen_cells;
   std::vector<double> range_sq;
   std::vector<LineSteps> beam_lines;
-  std::vector<std::uint32_t> sort_buffer;
 };
 
 ScanScratch& scanScratch()
@@ -91,50 +90,9 @@ ScanScratch& scanScratch()
   return scratch;
 }
 
-/// Sorts cell indexes below `bound` and drops duplicates. A 30 m scan marks a thousand cells: a least-significant-digit
-/// radix sort takes two passes of 11 bits over them on a grid of 4 M cells, about a third of std::sort's time at
-/// -O2 (issue 29). Short lists go to std::sort.
-void sortUnique(std::vector<std::uint32_t>& cells, std::size_t bound, std::vector<std::uint32_t>& scratch)
+void sortUnique(std::vector<std::uint32_t>& cells)
 {
-  constexpr std::size_t kMinRadix = 256;
-  if (cells.size() >= kMinRadix)
-  {
-    constexpr int kDigitBits = 11;
-    constexpr std::uint32_t kDigits = 1u << kDigitBits;
-    const std::uint64_t largest = bound == 0 ? 0 : bound - 1;
-    scratch.resize(cells.size());
-    std::uint32_t* from = cells.data();
-    std::uint32_t* to = scratch.data();
-    const std::size_t n = cells.size();
-    for (int shift = 0; shift < 32 && (largest >> shift) != 0; shift += kDigitBits)
-    {
-      std::uint32_t start[kDigits] = {};
-      for (std::size_t i = 0; i < n; ++i)
-      {
-        ++start[(from[i] >> shift) & (kDigits - 1)];
-      }
-      std::uint32_t sum = 0;
-      for (std::uint32_t& d : start)
-      {
-        const std::uint32_t count = d;
-        d = sum;
-        sum += count;
-      }
-      for (std::size_t i = 0; i < n; ++i)
-      {
-        to[start[(from[i] >> shift) & (kDigits - 1)]++] = from[i];
-      }
-      std::swap(from, to);
-    }
-    if (from != cells.data())
-    {
-      std::copy(from, from + n, cells.data());
-    }
-  }
-  else
-  {
-    std::sort(cells.begin(), cells.end());
-  }
+  std::sort(cells.begin(), cells.end());
   cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
 }
 }  // namespace
@@ -218,7 +176,7 @@ public:
         usable(p, limits_, touch_);
       }
     }
-    sortUnique(touch_.marked, g_.cellCount(), scanScratch().sort_buffer);
+    sortUnique(touch_.marked);
     readBack();
     if (watching_)
     {
