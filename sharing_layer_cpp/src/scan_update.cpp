@@ -155,9 +155,9 @@ public:
     oy_ = observation_.origin.y;
     touch_.origin_in_map = std::isfinite(observation_.origin.z) && g_.worldToMap(ox_, oy_, x0_, y0_);
     cell_raytrace_range_ = g_.cellDistance(limits_.raytrace_range);
+    // (the loose cells are left out of the count: most of them are marked again by the scan and not walked)
     scan_detail::BeamIndex beams(watching_ ? observation_.points.size() : 0, x0_, y0_, cell_raytrace_range_,
-                                 watch_.regions.size() + watch_.loose_cells.size() +
-                                     (watch_.regions.empty() ? watch_.cells.size() : 0));
+                                 watch_.regions.empty() ? watch_.cells.size() : watch_.regions.size());
     beams_ = &beams;
     clearing_ = touch_.origin_in_map && limits_.clearing;
     if (clearing_)
