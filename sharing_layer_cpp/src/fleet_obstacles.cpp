@@ -261,12 +261,12 @@ void FleetObstacles::refreshViewIndex()
 }
 
 void FleetObstacles::monitor(const std::vector<SharedObstacle*>& in_view, ScanEvidence& evidence, double now_s,
-                             const LayerParams& params, const ShareRules& rules, const GridGeometry& g,
-                             ObservedCells& observed, CellFlags& flags, std::vector<ObstacleUpdate>& updates)
+                             const LayerParams& params, const GridGeometry& g, ObservedCells& observed,
+                             CellFlags& flags, std::vector<ObstacleUpdate>& updates)
 {
   for (SharedObstacle* obstacle : in_view)
   {
-    if (!monitorOne(*obstacle, evidence, now_s, params, rules, g, observed, flags))
+    if (!monitorOne(*obstacle, evidence, now_s, params, g, observed, flags))
     {
       continue;
     }
@@ -293,8 +293,8 @@ void FleetObstacles::monitor(const std::vector<SharedObstacle*>& in_view, ScanEv
 }
 
 bool FleetObstacles::monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence, double now_s,
-                                const LayerParams& params, const ShareRules& rules, const GridGeometry& g,
-                                ObservedCells& observed, CellFlags& flags)
+                                const LayerParams& params, const GridGeometry& g, ObservedCells& observed,
+                                CellFlags& flags)
 {
   const CellRect& r = obstacle.rectangle_cells;
   marked_.clear();
@@ -315,13 +315,8 @@ bool FleetObstacles::monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence
     next_present = lowerBound(next_present, present->end(), index);
     return next_present != present->end() && *next_present == index;
   };
-  forEachIn(evidence.marked_watched, r, g, [&](std::uint32_t index) {
-    // Walls, and a fleet robot standing on the cell: neither new cells nor an observation of the obstacle.
-    if (!rules.statics.isStatic(index) && !rules.robots.excludes(index))
-    {
-      (is_present(index) ? seen_again_ : marked_).push_back(index);
-    }
-  });
+  forEachIn(evidence.marked_watched, r, g,
+            [&](std::uint32_t index) { (is_present(index) ? seen_again_ : marked_).push_back(index); });
   // A sign of occupancy: the evidence of free space starts again.
   if (!obstacle.free_streaks.empty())
   {

@@ -31,7 +31,6 @@ ScanOutcome ScanPass::run(const Observation& observation, double now_s, const Sc
 
   ScanOutcome outcome;
   outcome.touch = applyScan(parts.grid, observation, limits, watch_);
-  const ShareRules rules{ parts.statics, parts.fleet.monitoredCells(), parts.robots };
   const GridGeometry& g = parts.grid.geometry();
   sortMarked(outcome.touch, parts);
   parts.observed.track(unclaimed_, g, observation.origin.x, observation.origin.y, limits.obstacle_range, parts.grid,
@@ -43,7 +42,7 @@ ScanOutcome ScanPass::run(const Observation& observation, double now_s, const Sc
   summarise(observation, now_s, parts);
   if (!in_view_.empty())
   {
-    monitorInView(outcome.touch, now_s, parts, rules, outcome.updates);
+    monitorInView(outcome.touch, now_s, parts, outcome.updates);
   }
   return outcome;
 }
@@ -162,10 +161,6 @@ void ScanPass::sortMarked(const ScanTouch& touch, ScanParts& parts)
     {
       last_.robot_marked.push_back(index);
     }
-    if (monitored)
-    {
-      marked_watched_.push_back(index);
-    }
     if (monitored || parts.flags.has(index, CellFlags::kRemembered))
     {
       marked_known_.push_back(index);
@@ -173,10 +168,7 @@ void ScanPass::sortMarked(const ScanTouch& touch, ScanParts& parts)
     if (!is_static && !on_robot)
     {
       off_walls_.push_back(index);
-      if (!monitored)
-      {
-        unclaimed_.push_back(index);
-      }
+      (monitored ? marked_watched_ : unclaimed_).push_back(index);
     }
   }
 }
@@ -217,7 +209,7 @@ void ScanPass::summarise(const Observation& observation, double now_s, ScanParts
   last_.new_marked.erase(std::unique(last_.new_marked.begin(), last_.new_marked.end()), last_.new_marked.end());
 }
 
-void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts, const ShareRules& rules,
+void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts,
                              std::vector<ObstacleUpdate>& updates)
 {
   const GridGeometry& g = parts.grid.geometry();
@@ -233,7 +225,7 @@ void ScanPass::monitorInView(const ScanTouch& touch, double now_s, ScanParts& pa
                            std::max(steady_box.max_x, x), std::max(steady_box.max_y, y) };
   }
   ScanEvidence evidence{ marked_watched_, occupied_, touch.watched_free, steady_, steady_box };
-  parts.fleet.monitor(in_view_, evidence, now_s, parts.params, rules, g, parts.observed, parts.flags, updates);
+  parts.fleet.monitor(in_view_, evidence, now_s, parts.params, g, parts.observed, parts.flags, updates);
 }
 
 }  // namespace sharing_layer

@@ -38,7 +38,9 @@ struct WorldBounds
 /// @brief What one scan tells the monitoring of the shared obstacles in view (sorted cell lists of this scan).
 struct ScanEvidence
 {
-  const std::vector<std::uint32_t>& marked_watched;  ///< cells it marked inside a monitored rectangle
+  /// cells it marked inside a monitored rectangle, neither static nor on a fleet robot (neither is a new cell nor an
+  /// observation of the obstacle)
+  const std::vector<std::uint32_t>& marked_watched;
   const std::vector<std::uint32_t>& occupied;        ///< signs of occupancy among the watched cells
   const std::vector<std::uint32_t>& seen_free;       ///< watched cells a beam passed well beyond
   std::vector<std::uint32_t>& steady;                ///< growth candidates; an obstacle that takes one removes it
@@ -68,7 +70,6 @@ public:
   std::vector<std::uint32_t> presentCells(const std::string& uuid) const;
   /// @brief Whether a shared obstacle's rectangle covers the cell (monitoring has it, this robot does not propose it).
   bool monitored(std::uint32_t index) const { return monitored_.test(index); }
-  const BitGrid& monitoredCells() const { return monitored_; }
   std::size_t bytes() const { return monitored_.bytes(); }
 
   /// @brief Applies an update; bad input is rejected with a reason and changes nothing. Cells of a new or grown
@@ -88,8 +89,8 @@ public:
   /// @brief Monitors the obstacles in view with one scan's evidence; their changes are applied here and appended to
   /// `updates`, as this robot's (params.robot_name) updates for the fleet.
   void monitor(const std::vector<SharedObstacle*>& in_view, ScanEvidence& evidence, double now_s,
-               const LayerParams& params, const ShareRules& rules, const GridGeometry& g, ObservedCells& observed,
-               CellFlags& flags, std::vector<ObstacleUpdate>& updates);
+               const LayerParams& params, const GridGeometry& g, ObservedCells& observed, CellFlags& flags,
+               std::vector<ObstacleUpdate>& updates);
 
   // The master grid.
   /// @brief Sets every present cell inside the cell window [min_i, max_i) x [min_j, max_j) (clipped to g) to lethal
@@ -128,7 +129,7 @@ private:
                            const std::vector<std::uint32_t>& steady);
   /// @brief One obstacle in view: its evidence into marked/cleared cells; @return whether it has an update
   bool monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence, double now_s, const LayerParams& params,
-                  const ShareRules& rules, const GridGeometry& g, ObservedCells& observed, CellFlags& flags);
+                  const GridGeometry& g, ObservedCells& observed, CellFlags& flags);
   void markDirty(const std::vector<std::uint32_t>& cells, const GridGeometry& g);
   /// @brief Rebuilds view_index_ when obstacles came, went or grew.
   void refreshViewIndex();

@@ -31,14 +31,6 @@ struct RememberedCell
   double marked_since = 0.0;
 };
 
-/// @brief What the cells a scan marks are checked against before this robot may share them.
-struct ShareRules
-{
-  const StaticMask& statics;    ///< walls and unknown map areas (within static_tolerance)
-  const BitGrid& monitored;     ///< rectangles of the fleet's obstacles (FleetObstacles): monitoring has them
-  const FleetRobots& robots;    ///< fleet robots' footprints
-};
-
 /**
  * @brief What this robot's own scans found that the fleet does not hold yet, the triggers' candidates:
  * - the shareable cells: lethal now, not static, outside every shared obstacle's rectangle, not on a fleet robot,

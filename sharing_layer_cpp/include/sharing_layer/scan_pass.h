@@ -78,10 +78,10 @@ private:
   /// @brief Each usable point's cell (for applyScan: watch_.point_cells), the cells this scan will mark that are not
   /// lethal yet (not_lethal_before_), and its far endpoints.
   void collectNewMarks(const Observation& observation, const ScanLimits& limits, ScanParts& parts);
-  /// @brief Sorts the marked cells once by what they lie on, for the passes after it: walls (counted), shared
-  /// obstacles' rectangles (marked_watched_), remembered cells (with those: marked_known_), fleet robots
-  /// (last_.robot_marked), neither walls nor robots (off_walls_), none of these (unclaimed_). Each rule is looked up
-  /// once per cell, not once per pass.
+  /// @brief Sorts the marked cells once by what they lie on, for the passes after it: walls (counted), fleet robots
+  /// (last_.robot_marked), shared obstacles' rectangles or remembered cells (marked_known_); of the cells neither on
+  /// a wall nor on a robot (off_walls_), those in a shared obstacle's rectangle (marked_watched_) and the rest
+  /// (unclaimed_). Each rule is looked up once per cell, not once per pass.
   void sortMarked(const ScanTouch& touch, ScanParts& parts);
   /// @brief Signs of occupancy among the watched cells (occupied_): marked, an endpoint in it, or a beam that
   /// ended close behind it.
@@ -89,8 +89,7 @@ private:
   /// @brief The summary the triggers read (last_).
   void summarise(const Observation& observation, double now_s, ScanParts& parts);
   /// @brief Monitors the obstacles in view; their updates into `updates`.
-  void monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts, const ShareRules& rules,
-                     std::vector<ObstacleUpdate>& updates);
+  void monitorInView(const ScanTouch& touch, double now_s, ScanParts& parts, std::vector<ObstacleUpdate>& updates);
 
   LastScan last_;
   std::vector<SharedObstacle*> in_view_;
