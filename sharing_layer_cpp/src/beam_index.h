@@ -35,7 +35,8 @@ inline double pseudoAngle(double x, double y)
 /// beam's end cell, by point index. The first few regions test every beam against the region's wedge of
 /// directions (two cross products, vectorised); later ones test only the beams in buckets of pseudo-angle covering
 /// the wedge, sorted once. Beams that end nearer than a region's nearest cell are left out too (most beams towards
-/// a far obstacle end on something in front of it). A beam's line is computed when a region first reaches it.
+/// a far obstacle end on something in front of it). A beam's line is the one raytracing cleared, taken from the
+/// caller's list of lines when a region first reaches it.
 class BeamIndex
 {
 public:
@@ -53,12 +54,13 @@ public:
   static constexpr int kBuckets = 1024;      ///< about 0.35 degrees each
   static constexpr std::size_t kLinearQueries = 2;  ///< regions answered by testing every beam before buckets pay off
 
-  /// For an observation of `points` points, raytraced from cell (x0, y0) over at most max_length cells, to be asked
-  /// about `queries` regions: beyond kLinearQueries, the buckets are built for the first.
-  BeamIndex(std::size_t points, unsigned int x0, unsigned int y0, unsigned int max_length, std::size_t queries)
+  /// For an observation of `points` points, raytraced from cell (x0, y0) along `lines` (filled by the caller as it
+  /// adds the beams), to be asked about `queries` regions: beyond kLinearQueries, the buckets are built for the first.
+  BeamIndex(std::size_t points, unsigned int x0, unsigned int y0, const std::vector<LineSteps>& lines,
+            std::size_t queries)
     : x0_(x0)
     , y0_(y0)
-    , max_length_(max_length)
+    , lines_(lines)
     , n_(static_cast<std::uint32_t>(points))
     , s_(storage())
     , queries_(queries > kLinearQueries ? kLinearQueries : 0)
@@ -67,6 +69,7 @@ public:
     {
       s_.end_x.resize(points);
       s_.end_y.resize(points);
+      s_.line_of.resize(points);
       s_.dx.resize(points);
       s_.dy.resize(points);
       s_.pass.resize(points);
@@ -79,11 +82,13 @@ public:
     state_ = s_.state.data();
   }
 
-  /// The beam of point `point` ends in cell (x1, y1); clipped: the point lies off the grid, (x1, y1) on its edge.
-  void add(std::size_t point, unsigned int x1, unsigned int y1, bool clipped)
+  /// The beam of point `point` ends in cell (x1, y1) and was raytraced along lines[line]; clipped: the point lies off
+  /// the grid, (x1, y1) on its edge.
+  void add(std::size_t point, unsigned int x1, unsigned int y1, bool clipped, std::size_t line)
   {
     end_x_[point] = x1;  // (raytracing's inner loop: as little as possible here)
     end_y_[point] = y1;
+    s_.line_of[point] = static_cast<std::uint32_t>(line);
     state_[point] = clipped ? kClipped : kEndsInPoint;
   }
 
@@ -327,7 +332,7 @@ private:
       beam.scan = s_.scan;
       beam.end_x = end_x_[i];
       beam.end_y = end_y_[i];
-      beam.line = lineSteps(x0_, y0_, beam.end_x, beam.end_y, max_length_);  // as raytraced
+      beam.line = lines_[s_.line_of[i]];
       beam.point = i;
       beam.deep_steps = kUnset;
       beam.own_steps = kUnset;
@@ -341,6 +346,7 @@ private:
   {
     std::vector<std::uint8_t> state;         ///< per point: kNone, kEndsInPoint or kClipped
     std::vector<std::uint32_t> end_x, end_y;  ///< per point with a beam: its end cell
+    std::vector<std::uint32_t> line_of;       ///< per point with a beam: its line in lines_
     std::vector<float> dx, dy;               ///< the same minus the origin cell (filled when first asked)
     std::vector<std::uint8_t> pass;          ///< wedge test of every beam
     std::vector<Beam> beams;
@@ -356,7 +362,8 @@ private:
     return storage;
   }
 
-  unsigned int x0_, y0_, max_length_;
+  unsigned int x0_, y0_;
+  const std::vector<LineSteps>& lines_;
   std::uint32_t n_;
   Storage& s_;
   std::uint32_t* end_x_;

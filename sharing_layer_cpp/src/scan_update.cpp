@@ -156,7 +156,7 @@ public:
     touch_.origin_in_map = std::isfinite(observation_.origin.z) && g_.worldToMap(ox_, oy_, x0_, y0_);
     cell_raytrace_range_ = g_.cellDistance(limits_.raytrace_range);
     // (the loose cells are left out of the count: most of them are marked again by the scan and not walked)
-    scan_detail::BeamIndex beams(watching_ ? observation_.points.size() : 0, x0_, y0_, cell_raytrace_range_,
+    scan_detail::BeamIndex beams(watching_ ? observation_.points.size() : 0, x0_, y0_, beam_lines_,
                                  watch_.regions.empty() ? watch_.cells.size() : watch_.regions.size());
     beams_ = &beams;
     clearing_ = touch_.origin_in_map && limits_.clearing;
@@ -358,7 +358,7 @@ void ScanRun::clearPass()
     beam_lines_.emplace_back(x0_, y0_, x1, y1, cell_raytrace_range_);
     if (watching_)
     {
-      beams_->add(pi, x1, y1, clipped);
+      beams_->add(pi, x1, y1, clipped, beam_lines_.size() - 1);
     }
   }
   clearFan(costs_, g_.size_x, x0_, y0_, beam_lines_, FREE_SPACE);

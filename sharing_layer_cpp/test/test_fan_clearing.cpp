@@ -16,7 +16,6 @@ using sharing_layer::clearFan;
 using sharing_layer::FanStats;
 using sharing_layer::kNearSteps;
 using sharing_layer::LineSteps;
-using sharing_layer::lineSteps;
 
 namespace
 {
@@ -38,7 +37,7 @@ struct Fan
   void to(unsigned int x1, unsigned int y1, unsigned int max_length = UINT_MAX)
   {
     ends.push_back(End{ x1, y1, max_length });
-    lines.push_back(lineSteps(x0, y0, x1, y1, max_length));
+    lines.emplace_back(x0, y0, x1, y1, max_length);
   }
 };
 

@@ -59,7 +59,7 @@ Expected oracle(const GridGeometry& g, const Observation& obs, const ScanLimits&
     {
       shortest = std::min(shortest, std::hypot(obs.points[j].x - ox, obs.points[j].y - oy));
     }
-    const LineSteps line = lineSteps(x0, y0, x1, y1);
+    const LineSteps line(x0, y0, x1, y1);
     const unsigned int deep_steps =
         stepsWithin((shortest - watch.free_margin) / g.resolution, line.abs_da, line.dist());
     for (std::size_t step = 0; step < cells.size(); ++step)  // one cell per step along the dominant axis

@@ -120,12 +120,6 @@ struct LineSteps
   }
 };
 
-inline LineSteps lineSteps(unsigned int x0, unsigned int y0, unsigned int x1, unsigned int y1,
-                           unsigned int max_length = UINT_MAX)
-{
-  return LineSteps(x0, y0, x1, y1, max_length);
-}
-
 /**
  * @brief Applies an action to every cell on the line from (x0, y0) to (x1, y1), as
  * costmap_2d's Costmap2D::raytraceLine: the line is cut to max_length cells
@@ -136,7 +130,7 @@ template <class Action>
 inline void raytraceLine(Action at, unsigned int x0, unsigned int y0, unsigned int x1, unsigned int y1,
                          unsigned int size_x, unsigned int max_length = UINT_MAX)
 {
-  const LineSteps line = lineSteps(x0, y0, x1, y1, max_length);
+  const LineSteps line(x0, y0, x1, y1, max_length);
   const int row = static_cast<int>(size_x);
   const int offset_a = line.x_major ? line.sign_a : line.sign_a * row;
   const int offset_b = line.x_major ? line.sign_b * row : line.sign_b;
