@@ -16,7 +16,6 @@
 #include <vector>
 
 #include "sharing_layer/cost_values.h"
-#include "sharing_layer/fan_clearing.h"
 #include "sharing_layer/raycast.h"
 #include "sharing_layer/scan_update.h"
 #include "sharing_layer/sharing_core.h"
@@ -65,8 +64,6 @@ int main(int argc, char** argv)
   const bench::Scene scene = bench::makeScene();
   std::printf("reference scan: %zu of 1081 beams return within 30 m; grid %s\n", scene.scan.points.size(),
               scene.geometry.describe().c_str());
-  std::printf("clearing's far-field steps: %s (chosen at run time; the baseline below clears with the same)\n",
-              fanStepsWithAvx2() ? "AVX2" : "SSE2");
 
   bool all_ok = true;
   std::vector<double> raytrace_ranges = { 3.0, 30.0 };

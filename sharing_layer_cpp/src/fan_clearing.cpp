@@ -6,12 +6,6 @@
 #if defined(__SSE2__) && defined(__x86_64__)
 #define SHARING_LAYER_RECIPROCAL_STEPS 1
 #include <emmintrin.h>  // (part of every x86-64 target: no runtime dispatch needed)
-#if defined(__GNUC__)
-// AVX2 is not part of the x86-64 baseline that ROS packages build for: its steps are compiled for it alone (the
-// target attribute) and taken only where the CPU reports it, at run time.
-#define SHARING_LAYER_AVX2_STEPS 1
-#include <immintrin.h>
-#endif
 #endif
 
 namespace sharing_layer
@@ -44,104 +38,11 @@ int octant(const LineSteps& line)
   return (line.x_major ? 4 : 0) + (line.sign_a > 0 ? 2 : 0) + (line.sign_b >= 0 ? 1 : 0);
 }
 
-#if defined(SHARING_LAYER_AVX2_STEPS)
-/// The cells of eight consecutive steps, FanRun::raytraceSse2's arithmetic eight lanes wide: b = (n M) >> k, the cell
-/// base +- b * row.
-__attribute__((target("avx2"))) inline __m256i cellsOf8(__m256i numerators, __m256i bases, __m256i reciprocal,
-                                                         __m128i shift, __m256i row, bool b_down)
-{
-  const __m256i even = _mm256_srl_epi64(_mm256_mul_epu32(numerators, reciprocal), shift);
-  const __m256i odd = _mm256_srl_epi64(_mm256_mul_epu32(_mm256_srli_epi64(numerators, 32), reciprocal), shift);
-  const __m256i b_offset = _mm256_madd_epi16(_mm256_or_si256(even, _mm256_slli_epi64(odd, 32)), row);
-  return b_down ? _mm256_sub_epi32(bases, b_offset) : _mm256_add_epi32(bases, b_offset);
-}
-
-__attribute__((target("avx2"))) inline void write8(std::uint8_t* costs, std::uint8_t value, __m256i cells)
-{
-  const __m128i low = _mm256_castsi256_si128(cells);
-  const __m128i high = _mm256_extracti128_si256(cells, 1);
-  const std::uint64_t c0 = static_cast<std::uint64_t>(_mm_cvtsi128_si64(low));
-  const std::uint64_t c1 = static_cast<std::uint64_t>(_mm_extract_epi64(low, 1));
-  const std::uint64_t c2 = static_cast<std::uint64_t>(_mm_cvtsi128_si64(high));
-  const std::uint64_t c3 = static_cast<std::uint64_t>(_mm_extract_epi64(high, 1));
-  costs[static_cast<std::uint32_t>(c0)] = value;
-  costs[c0 >> 32] = value;
-  costs[static_cast<std::uint32_t>(c1)] = value;
-  costs[c1 >> 32] = value;
-  costs[static_cast<std::uint32_t>(c2)] = value;
-  costs[c2 >> 32] = value;
-  costs[static_cast<std::uint32_t>(c3)] = value;
-  costs[c3 >> 32] = value;
-}
-
-/**
- * Steps of one line in blocks of eight, sixteen per pass (FanRun::raytraceSse2 takes the rest): step s writes cell
- * base_s +- floor(n_s / A) * b_row with n_s = n + s B and base_s = base + s step_a, floor(n_s / A) = (n_s M) >> k.
- * @return the steps written (a multiple of eight, at most count); n and base move past them
- */
-__attribute__((target("avx2"))) unsigned int stepsAvx2(std::uint8_t* costs, std::uint8_t value, std::uint32_t M,
-                                                       int k, std::uint32_t B, std::uint32_t step_a,
-                                                       std::uint32_t b_row, bool b_down, std::uint32_t& n,
-                                                       std::uint32_t& base, unsigned int count)
-{
-  const __m256i reciprocal = _mm256_set1_epi32(static_cast<int>(M));
-  const __m128i shift = _mm_cvtsi32_si128(k);
-  const __m256i row = _mm256_set1_epi32(static_cast<int>(b_row));  // (< 2^15: pmaddwd's high halves are 0)
-  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  __m256i numerators = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(n)),
-                                        _mm256_mullo_epi32(lane, _mm256_set1_epi32(static_cast<int>(B))));
-  __m256i bases = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(base)),
-                                   _mm256_mullo_epi32(lane, _mm256_set1_epi32(static_cast<int>(step_a))));
-  const __m256i eight_numerators = _mm256_set1_epi32(static_cast<int>(8 * B));
-  const __m256i eight_bases = _mm256_set1_epi32(static_cast<int>(8 * step_a));
-  const __m256i sixteen_numerators = _mm256_add_epi32(eight_numerators, eight_numerators);
-  const __m256i sixteen_bases = _mm256_add_epi32(eight_bases, eight_bases);
-  unsigned int done = 0;
-  for (; count - done >= 16; done += 16)
-  {
-    // (two independent blocks per pass: the multiplies of one overlap the other's stores)
-    const __m256i first = cellsOf8(numerators, bases, reciprocal, shift, row, b_down);
-    const __m256i second = cellsOf8(_mm256_add_epi32(numerators, eight_numerators),
-                                    _mm256_add_epi32(bases, eight_bases), reciprocal, shift, row, b_down);
-    write8(costs, value, first);
-    write8(costs, value, second);
-    numerators = _mm256_add_epi32(numerators, sixteen_numerators);
-    bases = _mm256_add_epi32(bases, sixteen_bases);
-  }
-  if (count - done >= 8)
-  {
-    write8(costs, value, cellsOf8(numerators, bases, reciprocal, shift, row, b_down));
-    done += 8;
-  }
-  n += done * B;
-  base += done * step_a;
-  return done;
-}
-#endif
-
-/// Whether this CPU (and its OS) runs AVX2, asked once.
-bool cpuHasAvx2()
-{
-#if defined(SHARING_LAYER_AVX2_STEPS)
-  static const bool has = [] {
-    __builtin_cpu_init();  // (needed before __builtin_cpu_supports where static initialisers may run first)
-    return __builtin_cpu_supports("avx2") != 0;
-  }();
-  return has;
-#else
-  return false;
-#endif
-}
-
 class FanRun
 {
 public:
-  FanRun(std::uint8_t* costs, unsigned int size_x, unsigned int x0, unsigned int y0, std::uint8_t value, bool avx2)
-    : costs_(costs)
-    , row_(static_cast<int>(size_x))
-    , origin_(static_cast<std::size_t>(y0) * size_x + x0)
-    , value_(value)
-    , avx2_(avx2)
+  FanRun(std::uint8_t* costs, unsigned int size_x, unsigned int x0, unsigned int y0, std::uint8_t value)
+    : costs_(costs), row_(static_cast<int>(size_x)), origin_(static_cast<std::size_t>(y0) * size_x + x0), value_(value)
   {
   }
 
@@ -221,8 +122,7 @@ private:
    * (r + 1) / A <= 1. n < 2^30 holds for A <= kMaxReciprocalLength (n <= A / 2 + A^2). Four steps per vector,
    * two vectors per pass. Bresenham's carried branch mispredicts on most slopes; on the reference scan's beams
    * this takes about half of bresenham2D's time (-O2). Cell offsets are computed in 32 bits, as bresenham2D takes
-   * them. Where the CPU runs AVX2, blocks of eight steps go first (stepsAvx2): the scan pass spends about half its
-   * time here, and eight lanes take a tenth off `bench_core`'s scan at 30 m (issue 29).
+   * them.
    */
   void raytraceSse2(const LineSteps& line, unsigned int from, unsigned int to)
   {
@@ -238,19 +138,10 @@ private:
     const bool b_down = line.sign_b < 0;
     std::uint32_t n = A / 2 + from * B;  // (< 2^30, see above)
     std::uint32_t base = static_cast<std::uint32_t>(origin_) + from * step_a;  // the cell at step s, b = 0
-    unsigned int left = to - from + 1;
-#if defined(SHARING_LAYER_AVX2_STEPS)
-    if (avx2_ && left >= 8)
-    {
-      const unsigned int wide = stepsAvx2(costs, value, static_cast<std::uint32_t>(M), k, B, step_a, b_row, b_down, n,
-                                          base, left);
-      left -= wide;
-      stats_.wide_steps += wide;
-    }
-#endif
+    const unsigned int count = to - from + 1;
+    unsigned int left = count;
     if (left >= 4)
     {
-      const unsigned int count = left;
       const __m128i reciprocal = _mm_set1_epi32(static_cast<int>(static_cast<std::uint32_t>(M)));
       const __m128i shift = _mm_cvtsi32_si128(k);
       const __m128i row = _mm_set1_epi32(static_cast<int>(b_row));  // (< 2^15: pmaddwd's high halves are 0)
@@ -371,7 +262,6 @@ private:
   int row_;
   std::size_t origin_;
   std::uint8_t value_;
-  bool avx2_;  ///< the far field in blocks of eight steps (stepsAvx2)
   FanStats stats_;
   std::vector<const LineSteps*>& run_ = scratch().run;  ///< the run being gathered, in scan order
 
@@ -388,15 +278,10 @@ private:
 };
 }  // namespace
 
-bool fanStepsWithAvx2()
-{
-  return cpuHasAvx2();
-}
-
 FanStats clearFan(std::uint8_t* costs, unsigned int size_x, unsigned int x0, unsigned int y0,
-                  const std::vector<LineSteps>& lines, std::uint8_t value, FanVectors vectors)
+                  const std::vector<LineSteps>& lines, std::uint8_t value)
 {
-  return FanRun(costs, size_x, x0, y0, value, vectors == FanVectors::kWidest && cpuHasAvx2()).run(lines);
+  return FanRun(costs, size_x, x0, y0, value).run(lines);
 }
 
 }  // namespace sharing_layer

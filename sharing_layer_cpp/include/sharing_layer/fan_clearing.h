@@ -15,19 +15,7 @@ struct FanStats
   std::size_t groups = 0;             ///< runs of neighbouring beams filled together near the start
   std::size_t grouped_beams = 0;      ///< beams in those runs (the rest were raytraced from their start)
   std::size_t near_cells = 0;         ///< cells the fill wrote, against grouped_beams * (kNearSteps + 1) steps
-  std::size_t wide_steps = 0;         ///< steps beyond the fill written eight per AVX2 vector
 };
-
-/// The vector instructions the steps beyond the near field are written with: the widest this CPU runs (AVX2 where
-/// it reports it, at run time; SSE2, the x86-64 baseline, elsewhere), or SSE2 alone (tests compare the two).
-enum class FanVectors
-{
-  kWidest,
-  kSse2
-};
-
-/// @return whether clearFan (FanVectors::kWidest) writes with AVX2 on this CPU
-bool fanStepsWithAvx2();
 
 /**
  * @brief Writes value into every cell raytraceLine visits on each line, all lines starting at cell (x0, y0) of a
@@ -52,7 +40,7 @@ bool fanStepsWithAvx2();
  *   the run's b move by at most one from beam to beam, and cover every value between the least and the greatest.
  */
 FanStats clearFan(std::uint8_t* costs, unsigned int size_x, unsigned int x0, unsigned int y0,
-                  const std::vector<LineSteps>& lines, std::uint8_t value, FanVectors vectors = FanVectors::kWidest);
+                  const std::vector<LineSteps>& lines, std::uint8_t value);
 
 /// Steps from the start that the near-field fill covers (the beams of a run must all reach this far).
 constexpr unsigned int kNearSteps = 64;

@@ -39,7 +39,6 @@
 #include <tf2_ros/buffer.h>
 
 #include "../../bench/reference_scene.h"
-#include "sharing_layer/fan_clearing.h"
 #include "../messages.h"
 #include "../sharing_layer.h"
 
@@ -365,9 +364,7 @@ int main(int argc, char** argv)
   robots_pub.publish(fleetRobots());
   const double cells = static_cast<double>(scene.geometry.cellCount());
 
-  std::printf("bench_plugin_cycle: ours built %s; upstream %s; our clearing's far-field steps %s (chosen at run "
-              "time from the CPU, whatever the build flags)\n",
-              SHARING_BENCH_FLAGS, upstreamBuild().c_str(), sharing_layer::fanStepsWithAvx2() ? "AVX2" : "SSE2");
+  std::printf("bench_plugin_cycle: ours built %s; upstream %s\n", SHARING_BENCH_FLAGS, upstreamBuild().c_str());
   std::printf("reference scan: %zu beams on %s; %d rounds per case, medians, alternating which layer goes first; each "
               "layer alone behind the same map layer; ours with the map received, a %zu-pose plan, 10 fleet robots\n",
               scene.scan.points.size(), scene.geometry.describe().c_str(), rounds, path.poses.size());
