@@ -166,13 +166,9 @@ private:
         costs[static_cast<std::uint32_t>(high)] = value;
         costs[high >> 32] = value;
       };
-      const auto numerators_from = [B](std::uint32_t n0) {
-        return _mm_setr_epi32(static_cast<int>(n0), static_cast<int>(n0 + B), static_cast<int>(n0 + 2 * B),
-                              static_cast<int>(n0 + 3 * B));
-      };
-      const auto bases_from = [step_a](std::uint32_t base0) {
-        return _mm_setr_epi32(static_cast<int>(base0), static_cast<int>(base0 + step_a),
-                              static_cast<int>(base0 + 2 * step_a), static_cast<int>(base0 + 3 * step_a));
+      const auto lanes = [](std::uint32_t start, std::uint32_t step) {  // four consecutive steps' values
+        return _mm_setr_epi32(static_cast<int>(start), static_cast<int>(start + step),
+                              static_cast<int>(start + 2 * step), static_cast<int>(start + 3 * step));
       };
       if (left >= 8)
       {
@@ -181,10 +177,10 @@ private:
         // 8 step_a plus 8 B / A steps along b, plus one more where the remainder reaches A: an add, a compare and
         // two masks per lane instead of the reciprocal's two multiplies and three shifts.
         const unsigned int count = left;
-        const __m128i first_numerators = numerators_from(n), second_numerators = numerators_from(n + 4 * B);
+        const __m128i first_numerators = lanes(n, B), second_numerators = lanes(n + 4 * B, B);
         const __m128i first_b = carries_of(first_numerators), second_b = carries_of(second_numerators);
-        __m128i first = cells_at(first_b, bases_from(base));
-        __m128i second = cells_at(second_b, bases_from(base + 4 * step_a));
+        __m128i first = cells_at(first_b, lanes(base, step_a));
+        __m128i second = cells_at(second_b, lanes(base + 4 * step_a, step_a));
         __m128i first_rem = _mm_sub_epi32(first_numerators, _mm_madd_epi16(first_b, length));
         __m128i second_rem = _mm_sub_epi32(second_numerators, _mm_madd_epi16(second_b, length));
         const std::uint32_t step_b = b_down ? 0u - b_row : b_row;  // (cells wrap in 32 bits, as above)
@@ -216,7 +212,7 @@ private:
       }
       if (left >= 4)
       {
-        write(cells_at(carries_of(numerators_from(n)), bases_from(base)));
+        write(cells_at(carries_of(lanes(n, B)), lanes(base, step_a)));
         left -= 4;
         n += 4 * B;
         base += 4 * step_a;

@@ -58,10 +58,10 @@ void ObservedCells::watchRemembered(double now_s, double trigger_memory, const G
 void ObservedCells::track(const std::vector<std::uint32_t>& unclaimed, const GridGeometry& g, double ox, double oy,
                           double obstacle_range, const CostGrid& grid, CellFlags& flags)
 {
+  // (`unclaimed` holds no cell marked on a fleet robot, so a robot's trail does not become shareable; an obstacle
+  // beside it becomes shareable with the next scan that marks it after the robot left.)
   for (std::uint32_t index : unclaimed)
   {
-    // Cells marked on a fleet robot do not become shareable (nor stay so when it drives on); an obstacle
-    // beside it becomes shareable with the next scan that marks it after the robot left.
     if (!flags.has(index, CellFlags::kShareable))
     {
       flags.set(index, CellFlags::kShareable);
