@@ -603,12 +603,11 @@ void ScanRun::walkRegion(const CellRect& r)
           note(index, deep ? kVisitedDeep : kVisitedShallow);
         }
       }
+      // Without a branch: whether b moves is data, and a branch on it mispredicts on most slopes.
       error += line.abs_db;
-      if (error >= line.abs_da)
-      {
-        error -= line.abs_da;
-        ++carries;
-      }
+      const bool carry = error >= line.abs_da;
+      error -= carry ? line.abs_da : 0;
+      carries += carry;
     }
   });
 }
