@@ -18,41 +18,46 @@ std::vector<std::uint32_t> ObservedCells::rememberedSorted() const
 {
   std::vector<std::uint32_t> cells;
   cells.reserve(memory_.size());
-  for (const auto& entry : memory_)
+  for (const RememberedEntry& entry : memory_)
   {
     cells.push_back(entry.first);
   }
-  std::sort(cells.begin(), cells.end());
-  return cells;
+  return cells;  // (memory_ is sorted)
 }
 
 void ObservedCells::watchRemembered(double now_s, double trigger_memory, const GridGeometry& g, bool origin_finite,
                                     double ox, double oy, double reach_sq, CellFlags& flags,
                                     std::vector<std::uint32_t>& in_reach)
 {
-  for (auto it = memory_.begin(); it != memory_.end();)
+  std::size_t out = 0;
+  for (std::size_t in = 0; in < memory_.size(); ++in)
   {
-    const double age = now_s - it->second.time;
+    const RememberedEntry& entry = memory_[in];
+    const double age = now_s - entry.second.time;
     if (!(age <= trigger_memory) || age < 0.0)  // forgotten, or time went backwards (a restart)
     {
-      flags.clear(it->first, CellFlags::kRemembered);
-      it = memory_.erase(it);
+      flags.clear(entry.first, CellFlags::kRemembered);
       continue;
     }
     if (origin_finite)
     {
       unsigned int mx = 0, my = 0;
-      g.indexToCells(it->first, mx, my);
+      g.indexToCells(entry.first, mx, my);
       double wx = 0.0, wy = 0.0;
       g.mapToWorld(mx, my, wx, wy);
       if ((wx - ox) * (wx - ox) + (wy - oy) * (wy - oy) <= reach_sq)
       {
         // Scattered cells, mostly marked again by this very scan: walked one by one, and only if not.
-        in_reach.push_back(it->first);
+        in_reach.push_back(entry.first);
       }
     }
-    ++it;
+    if (out != in)
+    {
+      memory_[out] = entry;
+    }
+    ++out;
   }
+  memory_.resize(out);
 }
 
 void ObservedCells::track(const std::vector<std::uint32_t>& unclaimed, const GridGeometry& g, double ox, double oy,
@@ -96,41 +101,21 @@ void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint
   {
     return;
   }
-  const auto find = [&](std::uint32_t index) {
-    return flags.has(index, CellFlags::kRemembered) ? memory_.find(index) : memory_.end();
-  };
   // Remembered cells leave on the same evidence as shared ones, not on costmap clearing: a robot backing off
-  // clears a block's face with beams that end on it past obstacle_range.
-  for (std::uint32_t index : occupied)
-  {
-    const auto found = find(index);
-    if (found != memory_.end())
-    {
-      found->second.free.reset();
-    }
-  }
-  for (std::uint32_t index : touch.watched_free)
-  {
-    const auto found = find(index);
-    if (found != memory_.end() && found->second.free.add(now_s, clearing_scans, clearing_time))
-    {
-      flags.clear(index, CellFlags::kRemembered);
-      memory_.erase(found);
-    }
-  }
-  for (std::uint32_t index : touch.watched_cleared)
-  {
-    const auto found = find(index);
-    if (found != memory_.end())
-    {
-      found->second.marks = 0;  // a beam passed through it: not marked steadily
-    }
-  }
+  // clears a block's face with beams that end on it past obstacle_range. Every list is sorted, as the memory is.
+  forEachRemembered(occupied, flags, [](RememberedCell& cell) {
+    cell.free.reset();
+    return true;
+  });
+  forEachRemembered(touch.watched_free, flags, [&](RememberedCell& cell) {
+    return !cell.free.add(now_s, clearing_scans, clearing_time);
+  });
+  forEachRemembered(touch.watched_cleared, flags, [](RememberedCell& cell) {
+    cell.marks = 0;  // a beam passed through it: not marked steadily
+    return true;
+  });
   // (A cell marked on a fleet robot is not remembered: its trail must not be proposed once it drove on.)
-  for (std::uint32_t index : off_walls)
-  {
-    RememberedCell& cell = memory_[index];
-    flags.set(index, CellFlags::kRemembered);
+  const auto mark = [&](RememberedCell& cell) {
     if (cell.marks == 0)
     {
       cell.marked_since = now_s;
@@ -140,6 +125,30 @@ void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint
     cell.sensor_x = sensor_x;
     cell.sensor_y = sensor_y;
     cell.free.reset();
+  };
+  added_.clear();
+  MemoryIt at = memory_.begin();
+  for (std::uint32_t index : off_walls)
+  {
+    if (flags.has(index, CellFlags::kRemembered))
+    {
+      at = lowerBound(at, memory_.end(), index);
+      if (at != memory_.end() && at->first == index)
+      {
+        mark(at->second);
+        continue;
+      }
+    }
+    added_.emplace_back(index, RememberedCell{});
+    mark(added_.back().second);
+    flags.set(index, CellFlags::kRemembered);
+  }
+  if (!added_.empty())
+  {
+    const std::size_t before = memory_.size();
+    memory_.insert(memory_.end(), added_.begin(), added_.end());
+    std::inplace_merge(memory_.begin(), memory_.begin() + static_cast<std::ptrdiff_t>(before), memory_.end(),
+                       [](const RememberedEntry& a, const RememberedEntry& b) { return a.first < b.first; });
   }
 }
 
@@ -185,18 +194,16 @@ void ObservedCells::dropStatic(const StaticMask& statics, CellFlags& flags)
                                     return drop;
                                   }),
                    shareable_.end());
-  for (auto it = memory_.begin(); it != memory_.end();)
-  {
-    if (statics.isStatic(it->first))
-    {
-      flags.clear(it->first, CellFlags::kRemembered);
-      it = memory_.erase(it);
-    }
-    else
-    {
-      ++it;
-    }
-  }
+  memory_.erase(std::remove_if(memory_.begin(), memory_.end(),
+                               [&](const RememberedEntry& entry) {
+                                 const bool drop = statics.isStatic(entry.first);
+                                 if (drop)
+                                 {
+                                   flags.clear(entry.first, CellFlags::kRemembered);
+                                 }
+                                 return drop;
+                               }),
+                memory_.end());
 }
 
 void ObservedCells::forget(CellFlags& flags)
@@ -206,7 +213,7 @@ void ObservedCells::forget(CellFlags& flags)
     flags.clear(index, CellFlags::kShareable);
   }
   shareable_.clear();
-  for (const auto& entry : memory_)
+  for (const RememberedEntry& entry : memory_)
   {
     flags.clear(entry.first, CellFlags::kRemembered);
   }

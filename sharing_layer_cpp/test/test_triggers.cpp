@@ -231,6 +231,65 @@ TEST(TriggerMemory, RemovedObstacleLeavesTheMemoryOnEvidence)
   EXPECT_TRUE(report.proposals.empty()) << report.message;
 }
 
+TEST(TriggerMemory, CellsRememberedByLaterScansBelowEarlierOnesAreFoundAndForgotten)
+{
+  // The memory is kept sorted and walked along each scan's sorted lists: cells a later scan adds below, between and
+  // above the remembered ones must all be found again, by findRemembered and by the evidence that forgets them.
+  CellFlags flags;
+  flags.assign(100);
+  ObservedCells observed;
+  const ScanTouch no_touch;
+  const unsigned int clearing_scans = 2;
+  const double clearing_time = 0.5, trigger_memory = 10.0;
+  observed.remember(no_touch, { 50, 60 }, {}, 1.0f, 2.0f, 1.0, trigger_memory, clearing_scans, clearing_time, flags);
+  observed.remember(no_touch, { 10, 55, 70 }, {}, 3.0f, 4.0f, 1.1, trigger_memory, clearing_scans, clearing_time,
+                    flags);
+  EXPECT_EQ((std::vector<std::uint32_t>{ 10, 50, 55, 60, 70 }), observed.rememberedSorted());
+  for (std::uint32_t index : { 10u, 50u, 55u, 60u, 70u })
+  {
+    const RememberedCell* cell = observed.findRemembered(index, flags);
+    ASSERT_NE(nullptr, cell) << "cell " << index;
+    EXPECT_EQ(index == 50 || index == 60 ? 1.0f : 3.0f, cell->sensor_x) << "cell " << index;
+    EXPECT_TRUE(flags.has(index, CellFlags::kRemembered)) << "cell " << index;
+  }
+  EXPECT_EQ(nullptr, observed.findRemembered(11, flags));
+  // Seen free in two scans over clearing_time: 10 and 60 are forgotten, the rest stay.
+  ScanTouch free_10_60;
+  free_10_60.watched_free = { 10, 60 };
+  for (double t : { 2.0, 3.0 })
+  {
+    observed.remember(free_10_60, {}, {}, 0.0f, 0.0f, t, trigger_memory, clearing_scans, clearing_time, flags);
+  }
+  EXPECT_EQ((std::vector<std::uint32_t>{ 50, 55, 70 }), observed.rememberedSorted());
+  EXPECT_FALSE(flags.has(10, CellFlags::kRemembered));
+  EXPECT_FALSE(flags.has(60, CellFlags::kRemembered));
+  EXPECT_EQ(nullptr, observed.findRemembered(60, flags));
+  ASSERT_NE(nullptr, observed.findRemembered(70, flags));
+}
+
+TEST(TriggerMemory, OntoAnotherGridTheNewestOfTwoCellsLandingOnOneWins)
+{
+  CellFlags flags;
+  flags.assign(100);
+  ObservedCells observed;
+  const ScanTouch no_touch;
+  observed.remember(no_touch, { 10, 20 }, {}, 1.0f, 0.0f, 1.0, 10.0, 2, 0.5, flags);
+  observed.remember(no_touch, { 11 }, {}, 2.0f, 0.0f, 2.0, 10.0, 2, 0.5, flags);
+  // 10 and 11 land on cell 5 of the new grid (the older of them first, by index); 20 falls off it.
+  const auto mover = [](std::uint32_t index, std::uint32_t& moved) {
+    moved = 5;
+    return index != 20;
+  };
+  CellFlags new_flags;
+  new_flags.assign(50);
+  observed.moveTo(mover, false, new_flags);
+  EXPECT_EQ((std::vector<std::uint32_t>{ 5 }), observed.rememberedSorted());
+  const RememberedCell* cell = observed.findRemembered(5, new_flags);
+  ASSERT_NE(nullptr, cell);
+  EXPECT_EQ(2.0, cell->time);
+  EXPECT_EQ(2.0f, cell->sensor_x);
+}
+
 // --- trigger reasons ----------------------------------------------------------------------------------------
 
 TEST(TriggerReasons, DebouncedStaticAndAlreadyShared)

@@ -2,8 +2,9 @@
 #define SHARING_LAYER_OBSERVED_CELLS_H
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
-#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "sharing_layer/bit_grid.h"
@@ -30,6 +31,8 @@ struct RememberedCell
   std::uint16_t marks = 0;
   double marked_since = 0.0;
 };
+/// A remembered cell with its grid index.
+using RememberedEntry = std::pair<std::uint32_t, RememberedCell>;
 
 /**
  * @brief What this robot's own scans found that the fleet does not hold yet, the triggers' candidates:
@@ -43,17 +46,18 @@ class ObservedCells
 {
 public:
   const std::vector<std::uint32_t>& shareable() const { return shareable_; }
-  const std::unordered_map<std::uint32_t, RememberedCell>& memory() const { return memory_; }
+  /// @return the trigger memory, sorted by cell index
+  const std::vector<RememberedEntry>& memory() const { return memory_; }
   /// @return the remembered cell at index, or nullptr. Most cells asked about are not remembered: the flag spares
-  /// them the hash lookup.
+  /// them the search.
   const RememberedCell* findRemembered(std::uint32_t index, const CellFlags& flags) const
   {
     if (!flags.has(index, CellFlags::kRemembered))
     {
       return nullptr;
     }
-    const auto found = memory_.find(index);
-    return found == memory_.end() ? nullptr : &found->second;
+    const auto found = lowerBound(memory_.cbegin(), memory_.cend(), index);
+    return found != memory_.end() && found->first == index ? &found->second : nullptr;
   }
   /// @return the shareable cells, sorted
   std::vector<std::uint32_t> shareableSorted() const;
@@ -123,9 +127,69 @@ public:
   void moveTo(const Mover& mover, bool keep_observations, CellFlags& new_flags);
 
 private:
+  using MemoryIt = std::vector<RememberedEntry>::iterator;
+  /// @return the first entry of [from, end) whose index is not below index
+  template <class It>
+  static It lowerBound(It from, It end, std::uint32_t index)
+  {
+    return std::lower_bound(from, end, index,
+                            [](const RememberedEntry& entry, std::uint32_t i) { return entry.first < i; });
+  }
+  /**
+   * @brief Calls f(cell) for the remembered cells of `cells` (sorted), walking memory_ forward once. f returns
+   * whether the cell stays; one that does not is forgotten (its flag cleared) once the walk ends.
+   */
+  template <class F>
+  void forEachRemembered(const std::vector<std::uint32_t>& cells, CellFlags& flags, F f);
+
   std::vector<std::uint32_t> shareable_;
-  std::unordered_map<std::uint32_t, RememberedCell> memory_;
+  /// Sorted by cell index. Flat and sorted rather than hashed: each scan's lists of cells come sorted, so a scan
+  /// updates the memory in one forward walk, without a hash and a scattered node per cell (issue 29).
+  std::vector<RememberedEntry> memory_;
+  std::vector<RememberedEntry> added_;  ///< remember()'s cells remembered for the first time (kept: no allocation)
+  std::vector<std::size_t> gone_;       ///< forEachRemembered's entries to forget, by position
 };
+
+template <class F>
+void ObservedCells::forEachRemembered(const std::vector<std::uint32_t>& cells, CellFlags& flags, F f)
+{
+  gone_.clear();
+  MemoryIt at = memory_.begin();
+  for (std::uint32_t index : cells)
+  {
+    if (!flags.has(index, CellFlags::kRemembered))
+    {
+      continue;
+    }
+    at = lowerBound(at, memory_.end(), index);
+    if (at == memory_.end())
+    {
+      break;
+    }
+    if (at->first == index && !f(at->second))
+    {
+      flags.clear(index, CellFlags::kRemembered);
+      gone_.push_back(static_cast<std::size_t>(at - memory_.begin()));
+    }
+  }
+  if (gone_.empty())
+  {
+    return;
+  }
+  // One pass that closes the gaps (gone_ is in increasing order, as the walk went).
+  std::size_t out = gone_.front();
+  std::size_t next_gone = 0;
+  for (std::size_t in = gone_.front(); in < memory_.size(); ++in)
+  {
+    if (next_gone < gone_.size() && gone_[next_gone] == in)
+    {
+      ++next_gone;
+      continue;
+    }
+    memory_[out++] = memory_[in];
+  }
+  memory_.resize(out);
+}
 
 template <class Mover>
 void ObservedCells::moveTo(const Mover& mover, bool keep_observations, CellFlags& new_flags)
@@ -144,20 +208,24 @@ void ObservedCells::moveTo(const Mover& mover, bool keep_observations, CellFlags
     }
     std::sort(shareable.begin(), shareable.end());
   }
-  std::unordered_map<std::uint32_t, RememberedCell> memory;
-  for (const auto& entry : memory_)
+  std::vector<RememberedEntry> memory;
+  memory.reserve(memory_.size());
+  for (const RememberedEntry& entry : memory_)
   {
     std::uint32_t moved = 0;
     if (mover(entry.first, moved))
     {
-      const auto found = memory.find(moved);
-      if (found == memory.end() || found->second.time < entry.second.time)
-      {
-        memory[moved] = entry.second;
-      }
+      memory.emplace_back(moved, entry.second);
     }
   }
-  for (const auto& entry : memory)
+  // Where two land on one cell the newest time wins: sorted newest first within a cell, the first of each is kept.
+  std::sort(memory.begin(), memory.end(), [](const RememberedEntry& a, const RememberedEntry& b) {
+    return a.first != b.first ? a.first < b.first : a.second.time > b.second.time;
+  });
+  memory.erase(std::unique(memory.begin(), memory.end(),
+                           [](const RememberedEntry& a, const RememberedEntry& b) { return a.first == b.first; }),
+               memory.end());
+  for (const RememberedEntry& entry : memory)
   {
     new_flags.set(entry.first, CellFlags::kRemembered);
   }
