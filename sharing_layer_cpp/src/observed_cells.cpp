@@ -126,7 +126,9 @@ void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint
     cell.sensor_y = sensor_y;
     cell.free.reset();
   };
-  added_.clear();
+  // (A local: cells new to the memory are few after the first scans, and a member would keep the first scan's
+  // thousand entries on the heap for good.)
+  std::vector<RememberedEntry> added;
   MemoryIt at = memory_.begin();
   for (std::uint32_t index : off_walls)
   {
@@ -139,14 +141,14 @@ void ObservedCells::remember(const ScanTouch& touch, const std::vector<std::uint
         continue;
       }
     }
-    added_.emplace_back(index, RememberedCell{});
-    mark(added_.back().second);
+    added.emplace_back(index, RememberedCell{});
+    mark(added.back().second);
     flags.set(index, CellFlags::kRemembered);
   }
-  if (!added_.empty())
+  if (!added.empty())
   {
     const std::size_t before = memory_.size();
-    memory_.insert(memory_.end(), added_.begin(), added_.end());
+    memory_.insert(memory_.end(), added.begin(), added.end());
     std::inplace_merge(memory_.begin(), memory_.begin() + static_cast<std::ptrdiff_t>(before), memory_.end(),
                        [](const RememberedEntry& a, const RememberedEntry& b) { return a.first < b.first; });
   }

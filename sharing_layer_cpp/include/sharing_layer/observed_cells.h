@@ -146,8 +146,7 @@ private:
   /// Sorted by cell index. Flat and sorted rather than hashed: each scan's lists of cells come sorted, so a scan
   /// updates the memory in one forward walk, without a hash and a scattered node per cell (issue 29).
   std::vector<RememberedEntry> memory_;
-  std::vector<RememberedEntry> added_;  ///< remember()'s cells remembered for the first time (kept: no allocation)
-  std::vector<std::size_t> gone_;       ///< forEachRemembered's entries to forget, by position
+  std::vector<std::size_t> gone_;  ///< forEachRemembered's entries to forget, by position
 };
 
 template <class F>
