@@ -2,7 +2,6 @@
 #define SHARING_LAYER_OBSERVED_CELLS_H
 
 #include <algorithm>
-#include <cstddef>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -146,13 +145,12 @@ private:
   /// Sorted by cell index. Flat and sorted rather than hashed: each scan's lists of cells come sorted, so a scan
   /// updates the memory in one forward walk, without a hash and a scattered node per cell (issue 29).
   std::vector<RememberedEntry> memory_;
-  std::vector<std::size_t> gone_;  ///< forEachRemembered's entries to forget, by position
 };
 
 template <class F>
 void ObservedCells::forEachRemembered(const std::vector<std::uint32_t>& cells, CellFlags& flags, F f)
 {
-  gone_.clear();
+  bool forgot = false;
   MemoryIt at = memory_.begin();
   for (std::uint32_t index : cells)
   {
@@ -168,26 +166,17 @@ void ObservedCells::forEachRemembered(const std::vector<std::uint32_t>& cells, C
     if (at->first == index && !f(at->second))
     {
       flags.clear(index, CellFlags::kRemembered);
-      gone_.push_back(static_cast<std::size_t>(at - memory_.begin()));
+      forgot = true;
     }
   }
-  if (gone_.empty())
+  if (forgot)  // (the entries forgotten are those whose flag went: memory_ and the flags hold the same cells)
   {
-    return;
+    memory_.erase(std::remove_if(memory_.begin(), memory_.end(),
+                                 [&](const RememberedEntry& entry) {
+                                   return !flags.has(entry.first, CellFlags::kRemembered);
+                                 }),
+                  memory_.end());
   }
-  // One pass that closes the gaps (gone_ is in increasing order, as the walk went).
-  std::size_t out = gone_.front();
-  std::size_t next_gone = 0;
-  for (std::size_t in = gone_.front(); in < memory_.size(); ++in)
-  {
-    if (next_gone < gone_.size() && gone_[next_gone] == in)
-    {
-      ++next_gone;
-      continue;
-    }
-    memory_[out++] = memory_[in];
-  }
-  memory_.resize(out);
 }
 
 template <class Mover>
