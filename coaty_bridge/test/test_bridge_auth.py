@@ -6,7 +6,6 @@ import functools
 import os
 import shutil
 import subprocess
-import time
 import uuid as uuidlib
 
 import pytest
@@ -54,6 +53,8 @@ class RawClient:
         if username:
             self.client.username_pw_set(username, password)
         self.client.on_connect = self._on_connect
+        # connected once the broker acknowledged the subscription: before it, what others publish may not arrive
+        self.client.on_subscribe = lambda *args: setattr(self, "connected", True)
         self.client.on_message = lambda c, u, m: self.received.append((m.topic, bytes(m.payload)))
         self.client.connect_async("127.0.0.1", port)
         self.client.loop_start()
@@ -61,7 +62,6 @@ class RawClient:
     def _on_connect(self, client, userdata, flags, rc, properties=None):
         if rc == 0:
             client.subscribe("coaty/#")
-            self.connected = True
         else:
             self.refused.append(rc)
 
@@ -123,7 +123,7 @@ def test_wrong_credentials_and_anonymous_logins_are_refused(secured_broker, clea
     wait_for(lambda: stranger.refused, "the anonymous client's refused login")
     assert not wrong.connected and not stranger.connected
     right = bridge("robot_1", secured_broker.url, [], cleanup)
-    wait_for(lambda: right.connected, "robot_1 with its own credentials")
+    wait_for(lambda: right.subscribed, "robot_1 with its own credentials")
     assert not wrong.connected
 
 
@@ -145,7 +145,7 @@ def test_bridge_drops_a_forged_source_and_accepts_updates_under_the_senders_name
     receiver = bridge("robot_2", secured_broker.url, received, cleanup)
     robot_1 = RawClient(secured_broker.port, identity_for(NS, "robot_1"), "pw-robot_1")
     cleanup.append(robot_1)
-    wait_for(lambda: receiver.connected and robot_1.connected, "logged in")
+    wait_for(lambda: receiver.subscribed and robot_1.connected, "logged in")
     own_id = identity_for(NS, "robot_1")
     forged = obstacle("robot_0")                       # robot_1 speaking for robot_0
     clear_of_other = obstacle("robot_1", uuid=forged.uuid, version=2, marked=(), cleared=(5,))
@@ -159,10 +159,13 @@ def test_bridge_drops_a_forged_source_and_accepts_updates_under_the_senders_name
 
 def test_two_bridges_share_through_the_secured_broker(secured_broker, cleanup):
     got_1 = []
+    # robot_0 first: robot_1's connect-time Discover then reaches it, and is answered before robot_0 holds the
+    # obstacle (else robot_1 learns it twice, from the answer and from the Advertise)
     robot_0 = bridge("robot_0", secured_broker.url, [], cleanup)
+    wait_for(lambda: robot_0.subscribed, "robot_0 subscribed")
     robot_1 = bridge("robot_1", secured_broker.url, got_1, cleanup)
-    wait_for(lambda: robot_0.connected and robot_1.connected, "both bridges connected")
-    time.sleep(0.2)  # robot_1's subscription is set up in its connect callback
+    wait_for(lambda: robot_1.subscribed and robot_0.counters().get("discovers_answered"),
+             "robot_1 subscribed, its Discover answered by robot_0")
     update = obstacle("robot_0")
     robot_0.publish_obstacle(update)
     wait_for(lambda: got_1 == [update], "robot_0's obstacle at robot_1")
@@ -251,9 +254,11 @@ def test_bridges_over_mqtts_with_client_certificates(tls_fleet, cleanup):
         # no password: the broker takes the login from the certificate's CN
         return bridge(robot, url, sink, cleanup, password="",
                       tls_ca=ca.cert, tls_cert=certs[robot].cert, tls_key=certs[robot].key)
-    robot_0, robot_1 = tls_bridge("robot_0", []), tls_bridge("robot_1", got_1)
-    wait_for(lambda: robot_0.connected and robot_1.connected, "both bridges over TLS")
-    time.sleep(0.2)
+    robot_0 = tls_bridge("robot_0", [])  # first, as in test_two_bridges_share_through_the_secured_broker
+    wait_for(lambda: robot_0.subscribed, "robot_0 over TLS")
+    robot_1 = tls_bridge("robot_1", got_1)
+    wait_for(lambda: robot_1.subscribed and robot_0.counters().get("discovers_answered"),
+             "robot_1 over TLS, its Discover answered by robot_0")
     update = obstacle("robot_0")
     robot_0.publish_obstacle(update)
     wait_for(lambda: got_1 == [update], "robot_0's obstacle at robot_1 over TLS")

@@ -188,7 +188,7 @@ def test_renewals_events_pass_between_a_bridge_and_coaty_js(coaty_js, json_lines
             receiver.start()
             peer.expect(lambda e: e.get("event") == "ready", what="Coaty JS agent online")
             deadline = time.monotonic() + 10
-            while not (source.connected and receiver.connected) and time.monotonic() < deadline:
+            while not (source.subscribed and receiver.subscribed) and time.monotonic() < deadline:
                 time.sleep(0.05)
             source.note_own_position((5.0, 5.0))
             first = make_update(version=1, deadline=100)

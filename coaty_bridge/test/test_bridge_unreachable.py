@@ -82,7 +82,7 @@ def test_a_reachable_broker_gets_no_unreachable_warning(caplog, broker, wait_for
     client = CoatyBridgeClient(BridgeConfig("robot_6", broker_url=broker.url), lambda u, t: None, clock=clock)
     client.start()
     try:
-        wait_for(lambda: client.connected, timeout=10, what="connected")
+        wait_for(lambda: client.subscribed, timeout=10, what="subscribed")
         clock.now += 120.0
         assert not client.check_broker()
         assert unreachable_warnings(caplog) == []

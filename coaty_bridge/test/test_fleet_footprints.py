@@ -169,7 +169,7 @@ def make_fleet_client(broker):
 def test_footprint_advert_reaches_the_peer_not_itself(make_fleet_client, observer, wait_for):
     a = make_fleet_client("robot_0")
     b = make_fleet_client("robot_1")
-    wait_for(lambda: a.connected and b.connected, what="both connected")
+    wait_for(lambda: a.subscribed and b.subscribed, what="both connected")
     wait_for(lambda: len(observer.on("/DSC/")) == 2, what="both subscribed")
     b.note_own_position((4.0, 6.0))   # robot_1 stands in the same 10 m area as robot_0's SQUARE
     mine = make(robot="robot_0")
@@ -193,7 +193,7 @@ def test_footprint_advert_reaches_the_peer_not_itself(make_fleet_client, observe
 @pytest.mark.broker
 def test_bad_footprint_payloads_are_counted_and_dropped_good_ones_pass(make_fleet_client, observer, wait_for):
     b = make_fleet_client("robot_1")
-    wait_for(lambda: b.connected and observer.on("/DSC/"), what="robot_1 subscribed")
+    wait_for(lambda: b.subscribed and observer.on("/DSC/"), what="robot_1 subscribed")
     sender = str(uuidlib.uuid4())
     topic = str(Topic("fleet", "ADV", sender, object_type=OT))
     bad = [b"not json", b"[1, 2]", b'{"object": {"robot": "robot_2"}}', b'{"object": 3}',
@@ -219,7 +219,7 @@ def test_bad_footprint_payloads_are_counted_and_dropped_good_ones_pass(make_flee
 @pytest.mark.broker
 def test_forged_footprint_is_dropped_with_authenticated_sources(make_fleet_client, observer, wait_for):
     b = make_fleet_client("robot_1", authenticate_sources=True)
-    wait_for(lambda: b.connected and observer.on("/DSC/"), what="robot_1 subscribed")
+    wait_for(lambda: b.subscribed and observer.on("/DSC/"), what="robot_1 subscribed")
     from coaty_bridge.identity import identity_for
     for sender in (str(uuidlib.uuid4()), identity_for("fleet", "robot_2")):
         observer.publish(str(Topic("fleet", "ADV", sender, object_type=OT)),
@@ -313,7 +313,7 @@ def test_a_robot_hears_the_areas_around_it_and_follows_its_own_moves(make_fleet_
     without areas) are heard anywhere."""
     listener = make_fleet_client("robot_0")
     near, far = make_fleet_client("robot_1"), make_fleet_client("robot_2")
-    wait_for(lambda: listener.connected and near.connected and far.connected and len(observer.on("/DSC/")) == 3,
+    wait_for(lambda: listener.subscribed and near.subscribed and far.subscribed and len(observer.on("/DSC/")) == 3,
              what="all subscribed")
     listener.note_own_position((5.0, 5.0))            # area (0, 0): hears x, y in [-10, 20)
 
@@ -358,7 +358,7 @@ def test_a_robot_hears_the_areas_around_it_and_follows_its_own_moves(make_fleet_
 def test_without_areas_every_advert_is_heard_under_the_plain_object_type(make_fleet_client, observer, wait_for):
     a = make_fleet_client("robot_0", footprint_area_size=0)
     b = make_fleet_client("robot_1", footprint_area_size=0)
-    wait_for(lambda: a.connected and b.connected and len(observer.on("/DSC/")) == 2, what="both subscribed")
+    wait_for(lambda: a.subscribed and b.subscribed and len(observer.on("/DSC/")) == 2, what="both subscribed")
     far = make(robot="robot_0", points=((500.0, 500.0), (500.5, 500.0), (500.5, 500.5)))
     wait_for(lambda: a.publish_footprint(far) and b.footprints, what="robot_1 hears robot_0 500 m away")
     assert observer.on("ADV::" + OT + "/"), "not under the plain objectType"
@@ -374,7 +374,7 @@ def test_an_area_change_while_offline_is_subscribed_on_connect(broker, observer,
     listener.note_own_position((105.0, 5.0))     # before it ever connected
     listener.start()
     try:
-        wait_for(lambda: listener.connected and observer.on("/DSC/"), what="robot_0 subscribed")
+        wait_for(lambda: listener.subscribed and observer.on("/DSC/"), what="robot_0 subscribed")
         sender = str(uuidlib.uuid4())
         topic = str(Topic("fleet", "ADV", sender, object_type=OT + ".area_11_0"))
         wait_for(lambda: observer.publish(topic, fp.footprint_payload(

@@ -125,7 +125,7 @@ def test_a_withdrawn_footprint_is_forgotten_at_once_and_only_its_sender_may_with
         return made
     listener, parked = client("robot_0"), client("robot_1")
     try:
-        wait_for(lambda: listener.connected and parked.connected, what="connected")
+        wait_for(lambda: listener.subscribed and parked.subscribed, what="subscribed")
         listener.note_own_position((1.0, 1.0))
         parked.note_own_position((2.0, 2.0))
         advert = fp.RobotFootprint("robot_1", 1.0, "map", shifted(SQUARE, 2.0, 2.0), valid_for=25.0)

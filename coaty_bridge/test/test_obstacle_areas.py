@@ -30,7 +30,7 @@ def test_monitoring_updates_reach_the_robots_around_the_obstacle_and_first_share
         make_client, make_update, wait_for):
     source, near, far = make_client("robot_0"), make_client("robot_1"), make_client("robot_2")
     unplaced = make_client("robot_3")   # no footprint yet: hears every area
-    wait_for(lambda: all(c.connected for c in (source, near, far, unplaced)), what="all connected")
+    wait_for(lambda: all(c.subscribed for c in (source, near, far, unplaced)), what="all connected")
     source.note_own_position((5.0, 5.0))
     near.note_own_position(NEAR)
     far.note_own_position(FAR)
@@ -65,7 +65,7 @@ def test_monitoring_updates_reach_the_robots_around_the_obstacle_and_first_share
 def test_without_obstacle_areas_every_update_goes_to_every_robot(make_client, make_update, wait_for):
     source = make_client("robot_0", obstacle_area_size=0)
     far = make_client("robot_2", obstacle_area_size=0)
-    wait_for(lambda: source.connected and far.connected, what="connected")
+    wait_for(lambda: source.subscribed and far.subscribed, what="subscribed")
     source.note_own_position((5.0, 5.0))
     far.note_own_position(FAR)
     first = make_update(version=1)
@@ -86,7 +86,7 @@ def test_far_copies_are_renewed_before_their_lease_runs_out(broker, make_client,
     source.start()
     far = make_client("robot_2")
     try:
-        wait_for(lambda: source.connected and far.connected, what="connected")
+        wait_for(lambda: source.subscribed and far.subscribed, what="subscribed")
         source.note_own_position((5.0, 5.0))
         far.note_own_position(FAR)
         first = make_update(version=1, deadline=20)        # far copies: until 1020
@@ -114,7 +114,7 @@ def test_a_renewal_covered_by_a_fleet_wide_update_is_not_sent(broker, make_updat
                                clock=lambda: now[0])
     source.start()
     try:
-        wait_for(lambda: source.connected, what="connected")
+        wait_for(lambda: source.subscribed, what="subscribed")
         source.note_own_position((5.0, 5.0))
         first = make_update(version=1, deadline=20)
         source.publish_obstacle(first)
@@ -131,7 +131,7 @@ def test_a_renewal_covered_by_a_fleet_wide_update_is_not_sent(broker, make_updat
 @pytest.mark.broker
 def test_bad_area_traffic_is_counted_and_dropped(make_client, make_update, observer, wait_for):
     robot = make_client("robot_0")
-    wait_for(lambda: robot.connected and len(observer.on("/DSC/")) >= 1, what="connected")
+    wait_for(lambda: robot.subscribed and len(observer.on("/DSC/")) >= 1, what="subscribed")
     robot.note_own_position((5.0, 5.0))
     peer = str(uuidlib.uuid4())
     # a Discover naming 65 obstacle areas (a robot asks for the 9 it enters)

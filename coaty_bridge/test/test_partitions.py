@@ -112,8 +112,7 @@ def test_partition_heals_and_lists_converge_without_resurrecting_cleared_cells(f
         try:
             r0 = fleet("robot_0", broker.url)
             r1 = fleet("robot_1", proxy.url)
-            wait_for(lambda: r0.client.connected and r1.client.connected, "both connected")
-            time.sleep(0.3)  # subscriptions made in the connect callbacks
+            wait_for(lambda: r0.client.subscribed and r1.client.subscribed, "both connected and subscribed")
             x = r0.share([0.0, 0.0, 0.5, 0.5])
             wait_for(lambda: converged(r0, r1) and r1.state(), "x on both")
             cleared_cell = x.marked[0]
@@ -143,8 +142,7 @@ def test_broker_restart_with_a_share_in_flight_loses_nothing(fleet):
         port = first.port
         r0 = fleet("robot_0", first.url)
         r1 = fleet("robot_1", first.url)
-        wait_for(lambda: r0.client.connected and r1.client.connected, "both connected")
-        time.sleep(0.3)
+        wait_for(lambda: r0.client.subscribed and r1.client.subscribed, "both connected and subscribed")
         x = r0.share([0.0, 0.0, 0.5, 0.5])
         wait_for(lambda: converged(r0, r1) and r1.state(), "x on both")
     # the broker is gone; robot_0 shares and updates meanwhile (queued), then it comes back
@@ -161,8 +159,7 @@ def test_robot_restart_gets_live_obstacles_back_but_not_expired_or_cleared_ones(
     with Broker() as broker:
         r0 = fleet("robot_0", broker.url)
         r1 = fleet("robot_1", broker.url)
-        wait_for(lambda: r0.client.connected and r1.client.connected, "both connected")
-        time.sleep(0.3)
+        wait_for(lambda: r0.client.subscribed and r1.client.subscribed, "both connected and subscribed")
         x = r0.share([0.0, 0.0, 0.5, 0.5])
         short = r0.share([2.0, 2.0, 2.5, 2.5], deadline=2)
         w = r1.share([3.5, 3.5, 4.0, 4.0])

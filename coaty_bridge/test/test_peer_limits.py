@@ -220,7 +220,7 @@ def test_attack_5_with_logins_the_client_id_is_the_login(logins_broker, observer
                                               password="pw-" + name)
             robots.append(robot)
             robot.client.start()
-            wait_for(lambda: robot.client.connected, what="%s connected" % name)
+            wait_for(lambda: robot.client.subscribed, what="%s connected" % name)
         uuid = robots[1].add([-3.0, -3.0, -2.7, -2.7])
         wait_for(lambda: uuid in robots[0].held(), what="robot_0 holds robot_1's obstacle")
         disconnects = _bridge_counter(robots[0], "disconnects")

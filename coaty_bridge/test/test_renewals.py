@@ -94,7 +94,7 @@ def test_the_renewals_a_bridge_has_due_go_out_in_one_event(broker, make_client, 
     source = _clocked(broker, "robot_0", now)
     far = make_client("robot_2")
     try:
-        wait_for(lambda: source.connected and far.connected, what="connected")
+        wait_for(lambda: source.subscribed and far.subscribed, what="subscribed")
         source.note_own_position((5.0, 5.0))
         far.note_own_position(FAR)
         firsts = [make_update(version=1, deadline=100) for _ in range(3)]
@@ -130,7 +130,7 @@ def test_the_renewals_a_bridge_has_due_go_out_in_one_event(broker, make_client, 
 def test_bad_renewals_on_the_wire_are_counted_and_the_good_entries_delivered(make_client, make_update, observer,
                                                                              wait_for):
     robot = make_client("robot_1", authenticate_sources=False)
-    wait_for(lambda: robot.connected, what="connected")
+    wait_for(lambda: robot.subscribed, what="subscribed")
     sender = str(uuidlib.uuid4())
     topic = str(Topic("fleet", "CHN", sender, filter=renewals.CHANNEL))
     good = make_update(version=2, source="robot_0")
@@ -150,7 +150,7 @@ def test_bad_renewals_on_the_wire_are_counted_and_the_good_entries_delivered(mak
 def test_a_renewal_of_another_robots_obstacle_under_a_forged_source_is_dropped(make_client, make_update, observer,
                                                                                wait_for):
     robot = make_client("robot_1", authenticate_sources=True)
-    wait_for(lambda: robot.connected, what="connected")
+    wait_for(lambda: robot.subscribed, what="subscribed")
     forged = make_update(version=2, source="robot_0")
     observer.publish(str(Topic("fleet", "CHN", str(uuidlib.uuid4()), filter=renewals.CHANNEL)),
                      json.dumps(payload_of([forged])))

@@ -382,6 +382,10 @@ class CoatyBridgeClient:
         # tell which robot asks in a Discover
         self._robot_of = {}
         self._connected = False
+        # the broker acknowledged the subscriptions made on connecting (their SUBACK's message id): before that,
+        # what peers publish may not reach this client yet
+        self._subscribed = False
+        self._connect_subscribe_mid = None
         self._ever_connected = False
         self._stopping = False
         self._killed = False
@@ -446,6 +450,7 @@ class CoatyBridgeClient:
         self._mqtt.on_disconnect = self._on_disconnect
         self._mqtt.on_connect_fail = self._on_connect_fail
         self._mqtt.on_message = self._on_mqtt_message
+        self._mqtt.on_subscribe = self._on_subscribe
 
     # ------------------------------------------------------------ lifecycle
 
@@ -626,6 +631,12 @@ class CoatyBridgeClient:
     @property
     def connected(self):
         return self._connected
+
+    @property
+    def subscribed(self):
+        """Connected, and the broker has acknowledged the subscriptions made on connecting: from here on what peers
+        publish to them reaches this client (before it, the broker may not have them yet)."""
+        return self._connected and self._subscribed
 
     def counters(self):
         """A snapshot of all counters (dropped.<reason>, published, received, ...)."""
@@ -927,7 +938,9 @@ class CoatyBridgeClient:
             except OSError:
                 pass
         with self._lock:
-            client.subscribe(self._subscriptions + [(t, self._qos) for t in sorted(self._area_subscriptions)])
+            topics = self._subscriptions + [(t, self._qos) for t in sorted(self._area_subscriptions)]
+            _, self._connect_subscribe_mid = client.subscribe(topics)
+            self._subscribed = False
             self._connected = True
             if self._ever_connected:
                 self._counters["reconnects"] += 1
@@ -950,9 +963,16 @@ class CoatyBridgeClient:
         self._flush_queue()
         self._discover_obstacles()
 
+    def _on_subscribe(self, client, userdata, mid, granted_qos, properties=None):
+        """paho: a SUBACK. The one for the subscriptions made on connecting makes the client subscribed."""
+        with self._lock:
+            if mid == self._connect_subscribe_mid:
+                self._subscribed = True
+
     def _on_disconnect(self, client, userdata, rc, properties=None):
         with self._lock:
             self._connected = False
+            self._subscribed = False
             if not self._stopping and self._down_since is None:
                 # this line is the outage's first warning; check_broker repeats it while it lasts
                 self._down_since = self._last_unreachable_warn = self._clock()
