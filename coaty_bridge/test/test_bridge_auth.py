@@ -15,7 +15,7 @@ from coaty_bridge.broker import Broker
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, _make_paho_client
 from coaty_bridge.identity import identity_for
 from coaty_bridge.pki import make_ca, make_cert
-from polling import wait_until
+from polling import join_after, wait_until
 
 pytestmark = pytest.mark.broker
 OT = codec.DEFAULT_OBJECT_TYPE
@@ -159,13 +159,8 @@ def test_bridge_drops_a_forged_source_and_accepts_updates_under_the_senders_name
 
 def test_two_bridges_share_through_the_secured_broker(secured_broker, cleanup):
     got_1 = []
-    # robot_0 first: robot_1's connect-time Discover then reaches it, and is answered before robot_0 holds the
-    # obstacle (else robot_1 learns it twice, from the answer and from the Advertise)
     robot_0 = bridge("robot_0", secured_broker.url, [], cleanup)
-    wait_for(lambda: robot_0.subscribed, "robot_0 subscribed")
-    robot_1 = bridge("robot_1", secured_broker.url, got_1, cleanup)
-    wait_for(lambda: robot_1.subscribed and robot_0.counters().get("discovers_answered"),
-             "robot_1 subscribed, its Discover answered by robot_0")
+    join_after(robot_0, lambda: bridge("robot_1", secured_broker.url, got_1, cleanup), wait_for)
     update = obstacle("robot_0")
     robot_0.publish_obstacle(update)
     wait_for(lambda: got_1 == [update], "robot_0's obstacle at robot_1")
@@ -254,11 +249,8 @@ def test_bridges_over_mqtts_with_client_certificates(tls_fleet, cleanup):
         # no password: the broker takes the login from the certificate's CN
         return bridge(robot, url, sink, cleanup, password="",
                       tls_ca=ca.cert, tls_cert=certs[robot].cert, tls_key=certs[robot].key)
-    robot_0 = tls_bridge("robot_0", [])  # first, as in test_two_bridges_share_through_the_secured_broker
-    wait_for(lambda: robot_0.subscribed, "robot_0 over TLS")
-    robot_1 = tls_bridge("robot_1", got_1)
-    wait_for(lambda: robot_1.subscribed and robot_0.counters().get("discovers_answered"),
-             "robot_1 over TLS, its Discover answered by robot_0")
+    robot_0 = tls_bridge("robot_0", [])
+    join_after(robot_0, lambda: tls_bridge("robot_1", got_1), wait_for)
     update = obstacle("robot_0")
     robot_0.publish_obstacle(update)
     wait_for(lambda: got_1 == [update], "robot_0's obstacle at robot_1 over TLS")

@@ -10,18 +10,15 @@ from coaty_bridge import codec
 from coaty_bridge.broker import Broker
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.topics import Topic
+from polling import join_after
 
 pytestmark = pytest.mark.broker
 OT = codec.DEFAULT_OBJECT_TYPE
 
 
 def test_obstacle_reaches_the_peer_intact_and_is_not_echoed(make_client, make_update, observer, wait_for):
-    # robot_0 first: robot_1's connect-time Discover then reaches it, and is answered before robot_0 holds the
-    # obstacle (else robot_1 learns it twice, from the answer and from the Advertise)
     a = make_client("robot_0")
-    wait_for(lambda: a.subscribed, what="robot_0 subscribed")
-    b = make_client("robot_1")
-    wait_for(lambda: b.subscribed and a.counters().get("discovers_answered"), what="robot_1's discover answered")
+    b = join_after(a, lambda: make_client("robot_1"), wait_for)
     update = make_update(version=3)
     assert a.publish_obstacle(update)
     wait_for(lambda: b.received_updates, what="delivery to robot_1")
@@ -125,8 +122,6 @@ def test_subscribed_only_once_the_broker_acknowledged_the_connects_subscriptions
     """Connected is not enough to be heard: until the broker's SUBACK, what a peer publishes may not reach the robot
     (a test publishing at "connected" lost its first message once in CI). A real broker answers too fast to hold the
     SUBACK back, so paho's side is stood in for: the connect callback gets a stand-in that returns a message id."""
-    from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
-
     class PahoStandIn:
         def socket(self):
             return None

@@ -24,7 +24,7 @@ from coaty_bridge import codec
 from coaty_bridge.broker import free_port
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, _make_paho_client
 from coaty_bridge.identity import identity_for
-from polling import wait_until
+from polling import join_after, wait_until
 
 pytestmark = pytest.mark.broker
 PKG = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -116,13 +116,8 @@ def test_readme_recipe_as_written(deployed):
             clients.append(client)
             client.start()
             return client
-        # robot_0 first: robot_1's connect-time Discover then reaches it, and is answered before robot_0 holds the
-        # obstacle (else robot_1 learns it twice, from the answer and from the Advertise)
         robot_0 = bridge("robot_0", [])
-        wait_for(lambda: robot_0.subscribed, "robot_0 over TLS")
-        robot_1 = bridge("robot_1", got_1)
-        wait_for(lambda: robot_1.subscribed and robot_0.counters().get("discovers_answered"),
-                 "robot_1 over TLS, its Discover answered by robot_0")
+        join_after(robot_0, lambda: bridge("robot_1", got_1), wait_for)
         update = codec.ObstacleUpdate(str(uuidlib.uuid4()), "robot_0", 1, 10.0, "map", 60, (0.0, 0.0, 1.0, 1.0),
                                       0.05, 0.0, 0.0, 100, 100, (5, 6), ())
         robot_0.publish_obstacle(update)

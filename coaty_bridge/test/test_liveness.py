@@ -46,9 +46,8 @@ class Robot(test_peer_authority.Robot):
 
 
 def _subscribed(robot, wait_for):
-    """Waits until the robot hears its own heartbeats: connected is set before the broker has
-    taken the subscriptions, and a heartbeat published before that is not delivered."""
-    wait_for(lambda: robot.client.subscribed, what="%s connected" % robot.name)
+    """Waits until the robot is subscribed (CoatyBridgeClient.subscribed) and hears its own heartbeats."""
+    wait_for(lambda: robot.client.subscribed, what="%s subscribed" % robot.name)
     echoed = robot.client.liveness.values()["heartbeats_echoed"]
 
     def echo():
