@@ -1,6 +1,8 @@
 # The one entry point. On a fresh Debian 12 machine, as root:
-#   make demo   set up, build, and run the simulated fleet demo (report in out/)
+#   make demo   set up, build, and run the fleet demo (report in out/)
 #   make test   set up, build, and run every test (gtest, pytest, rostest)
+# setup installs Debian's packages and builds upstream move_base and Stage where the distribution
+# lacks them (upstream/README.md: about 5-9 minutes the first time, seconds after).
 SHELL := /bin/bash
 PY := /usr/bin/python3
 WS := catkin_ws
@@ -12,10 +14,9 @@ JOBS ?= 2
 setup:
 	bash scripts/setup.sh
 
+# Our workspace on top of the upstream stack setup built (or the distribution's).
 build:
-	$(ENV) catkin_make -C $(WS) -j$(JOBS) -DPYTHON_EXECUTABLE=$(PY) -DCMAKE_BUILD_TYPE=Release \
-	  -DCATKIN_ENABLE_TESTING=ON
-	$(ENV) catkin_make -C $(WS) -j$(JOBS) tests
+	JOBS=$(JOBS) bash scripts/build.sh
 
 # Every test: gtest, pytest and rostest. Prints one closing line
 # "N passed, N failed, N skipped" and fails if a test failed or none ran.

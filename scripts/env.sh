@@ -3,12 +3,27 @@
 # only it can import rospy.
 REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 export PATH="/usr/bin:$PATH"
-if [ -f "$REPO_ROOT/catkin_ws/devel/setup.bash" ]; then
+# ROS Noetic from its own packages (Ubuntu 20.04), where it is installed and not yet sourced.
+if [ -z "${ROS_DISTRO:-}" ] && [ -f /opt/ros/noetic/setup.bash ]; then
   # shellcheck disable=SC1091
-  source "$REPO_ROOT/catkin_ws/devel/setup.bash"
+  source /opt/ros/noetic/setup.bash
 fi
-export ROS_IP=127.0.0.1
-export ROS_HOSTNAME=127.0.0.1
+# The upstream navigation stack and Stage that `make setup` built where the distribution lacks
+# them (upstream/README.md); only a complete build is ever sourced.
+export FLEET_UPSTREAM_CACHE="${FLEET_UPSTREAM_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/fleet_upstream}"
+if [ -f "$FLEET_UPSTREAM_CACHE/current/COMPLETE" ] && [ -f "$FLEET_UPSTREAM_CACHE/current/devel_isolated/setup.bash" ]; then
+  # shellcheck disable=SC1091
+  source "$FLEET_UPSTREAM_CACHE/current/devel_isolated/setup.bash" --extend
+fi
+if [ -f "$REPO_ROOT/catkin_ws/devel/setup.bash" ]; then
+  # --extend: this workspace goes first, on top of whatever the lines above sourced.
+  # shellcheck disable=SC1091
+  source "$REPO_ROOT/catkin_ws/devel/setup.bash" --extend
+fi
+# One host by default: every node, master and broker on loopback. On a fleet of several hosts set
+# ROS_IP (or ROS_HOSTNAME) and ROS_MASTER_URI to this host's address before sourcing this file.
+export ROS_IP="${ROS_IP:-127.0.0.1}"
+export ROS_HOSTNAME="${ROS_HOSTNAME:-$ROS_IP}"
 export PYTHONDONTWRITEBYTECODE=1
 # The shared data (real Stage worlds, move_base configs, bags) lives beside the repository.
 if [ -z "${FLEET_SHARED_DATA:-}" ] && [ -d "$REPO_ROOT/../shared/data" ]; then

@@ -27,8 +27,17 @@ PACKAGES=(
   rviz xvfb libgl1-mesa-dri fonts-dejavu-core imagemagick
 )
 
+cd "$(dirname "$0")/.."
+# What upstream/build_upstream.py needs to build move_base and Stage (nothing where the distribution
+# has them or a complete build is cached).
+mapfile -t UPSTREAM_PACKAGES < <(/usr/bin/python3 upstream/build_upstream.py --debian-packages)
+ALL_PACKAGES=("${PACKAGES[@]}")
+for pkg in "${UPSTREAM_PACKAGES[@]}"; do
+  [ -n "$pkg" ] && ALL_PACKAGES+=("$pkg")
+done
+
 missing=()
-for pkg in "${PACKAGES[@]}"; do
+for pkg in "${ALL_PACKAGES[@]}"; do
   if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
     missing+=("$pkg")
   fi
@@ -38,25 +47,26 @@ done
 # only ask apt for it when there is no node/npm at all.
 if command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1; then
   filtered=()
-  for pkg in "${missing[@]}"; do
+  for pkg in "${missing[@]+"${missing[@]}"}"; do
     [[ "$pkg" == nodejs || "$pkg" == npm ]] || filtered+=("$pkg")
   done
   missing=("${filtered[@]+"${filtered[@]}"}")
 fi
 
 if [ ${#missing[@]} -eq 0 ]; then
-  echo "setup: all ${#PACKAGES[@]} Debian packages present"
-  exit 0
-fi
-
-if [ "$(id -u)" -ne 0 ]; then
+  echo "setup: all ${#ALL_PACKAGES[@]} Debian packages present"
+elif [ "$(id -u)" -ne 0 ]; then
   echo "setup: missing packages: ${missing[*]}" >&2
   echo "setup: run 'make setup' as root (it uses apt-get) or install them yourself" >&2
   exit 1
+else
+  echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
-echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-apt-get update -qq
-apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# Upstream move_base, costmap_2d, map_server, fake_localization and Stage: from the distribution, the
+# cache, or built now from the pinned sources (upstream/README.md).
+/usr/bin/python3 upstream/build_upstream.py
 echo "setup: done"
