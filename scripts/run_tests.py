@@ -6,12 +6,15 @@ Each phase writes JUnit XML under test_results/, and the run ends with one line
 "N passed, N failed, N skipped". The exit code is non-zero when a test failed,
 when a phase could not run, or when no test ran at all.
 
-Rostests: every `.test` file anywhere in a package folder (not only under test/). A `.test`
-whose launch needs something that is not here (a ROS package that is not installed, or a test
-program its package builds only when an optional dependency is found, as sharing_layer_cpp's
-plugin_layer_tests needs costmap_2d) is reported as skipped with the reason, not failed.
+Rostests: every `.test` file anywhere in a package folder (not only under test/). `make setup`
+provides every ROS package a test needs (upstream move_base and Stage included), so a `.test` whose
+launch needs a package that is not here, or a test program its package builds only where an optional
+dependency is found (sharing_layer_cpp's plugin_layer_tests needs costmap_2d), is a failure naming
+it; with --allow-missing-ros-packages (a machine set up by hand) it is a skip with the reason.
+The summary lists each rostest with its outcome and the host it ran on: Stage with upstream
+move_base, our stand-ins (fleet_sim + fleet_nav), or no simulator.
 
-Usage: run_tests.py [--phase deps|gtest|pytest|rostest ...] [-k PYTEST_EXPR]
+Usage: run_tests.py [--phase deps|gtest|pytest|rostest ...] [-k PYTEST_EXPR] [--allow-missing-ros-packages]
 """
 import argparse
 import glob
@@ -29,7 +32,7 @@ DEVEL = os.path.join(ROOT, "catkin_ws", "devel")
 PACKAGES = ["sharing_msgs", "sharing_layer_cpp", "sharing_handler_py", "coaty_bridge",
             "fleet_sim", "fleet_nav", "sharing_replay", "vda5050_bridge", "launch", "tests"]
 # pytest folders that are not packages: the repository's own tools.
-TOOL_TEST_FOLDERS = ["scripts"]
+TOOL_TEST_FOLDERS = ["scripts", "upstream"]
 
 
 class Tally:
@@ -37,6 +40,7 @@ class Tally:
         self.passed = self.failed = self.skipped = 0
         self.failures = []
         self.skips = []
+        self.hosts = []  # (rostest file, outcome, host)
 
     def add_junit(self, path, label):
         """Adds the counts of one JUnit XML file; a file that can't be read is a failure."""
@@ -212,7 +216,22 @@ def write_skipped_junit(xml, name, reason):
     ET.ElementTree(suite).write(xml, encoding="utf-8", xml_declaration=True)
 
 
-def run_rostests(tally):
+def test_host(path):
+    """Which simulator and navigation host the rostest ``path`` runs on, read from its launch."""
+    try:
+        import roslaunch.config
+        config = roslaunch.config.load_config_default([path], None, verbose=False)
+    except Exception:  # noqa: BLE001 - an unreadable launch: rostest reports it
+        return "unknown"
+    packages = {node.package for node in list(config.nodes) + list(config.tests)}
+    if "stage_ros" in packages:
+        return "Stage + upstream move_base" if "move_base" in packages else "Stage"
+    if "fleet_sim" in packages:
+        return "stand-ins: fleet_sim + fleet_nav" if "fleet_nav" in packages else "stand-in fleet_sim"
+    return "no simulator"
+
+
+def run_rostests(tally, allow_missing=False):
     files = discover_rostests()
     if not files:
         print("[rostest] no .test files", flush=True)
@@ -223,13 +242,22 @@ def run_rostests(tally):
         out_dir = os.path.join(RESULTS, "rostest", name)
         shutil.rmtree(out_dir, ignore_errors=True)  # a stale result must not count as this run's
         reason = missing_requirements(path)
-        if reason:
+        if reason and allow_missing:
             print("[rostest %d/%d] %s SKIPPED: %s" % (i, len(files), rel, reason), flush=True)
             write_skipped_junit(os.path.join(out_dir, "skipped.xml"), name, reason)
             tally.skip("rostest " + rel, reason)
+            tally.hosts.append((rel, "skipped", "-"))
             continue
-        print("[rostest %d/%d] %s" % (i, len(files), rel), flush=True)
+        if reason:
+            print("[rostest %d/%d] %s FAILED: %s" % (i, len(files), rel, reason), flush=True)
+            tally.fail("rostest %s: %s (make setup provides it: run it, or pass --allow-missing-ros-packages)"
+                       % (rel, reason))
+            tally.hosts.append((rel, "failed", "-"))
+            continue
+        host = test_host(path)
+        print("[rostest %d/%d] %s (%s)" % (i, len(files), rel, host), flush=True)
         start = time.time()
+        failed_before = tally.failed
         proc = subprocess.run(["rostest", "--results-base-dir", out_dir, path], cwd=ROOT)
         results = glob.glob(os.path.join(out_dir, "**", "rosunit-*.xml"), recursive=True) + \
             glob.glob(os.path.join(out_dir, "**", "rostest-*.xml"), recursive=True)
@@ -247,12 +275,15 @@ def run_rostests(tally):
             tally.fail("rostest %s exited %d after %.0f s" % (rel, proc.returncode, time.time() - start))
         elif not counted:
             tally.fail("rostest %s produced no results" % rel)
+        tally.hosts.append((rel, "failed" if tally.failed > failed_before else "passed", host))
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--phase", action="append", choices=["deps", "gtest", "pytest", "rostest"])
     parser.add_argument("-k", dest="expr", help="pytest -k expression")
+    parser.add_argument("--allow-missing-ros-packages", action="store_true",
+                        help="skip, instead of failing, a rostest whose ROS packages are not installed")
     args = parser.parse_args()
     phases = args.phase or ["deps", "gtest", "pytest", "rostest"]
     os.makedirs(RESULTS, exist_ok=True)
@@ -265,8 +296,12 @@ def main():
     if "pytest" in phases:
         run_pytest(tally, args.expr)
     if "rostest" in phases:
-        run_rostests(tally)
+        run_rostests(tally, args.allow_missing_ros_packages)
 
+    if tally.hosts:
+        print("rostests and the host each ran on:")
+        for rel, outcome, host in tally.hosts:
+            print("  %-7s %-58s %s" % (outcome, rel, host))
     for skip in tally.skips:
         print("SKIPPED " + skip)
     for failure in tally.failures:

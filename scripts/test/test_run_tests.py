@@ -98,17 +98,38 @@ def test_a_missing_program_of_a_complete_package_is_not_a_skip(tmp_path):
     assert runner.missing_requirements(path) is None
 
 
-def test_the_plugin_test_is_skipped_naming_costmap_2d_where_it_is_missing():
+def test_the_plugin_test_and_the_real_stack_test_run_here():
+    """make setup builds upstream costmap_2d, move_base and Stage where the distribution lacks them,
+    so neither the plugin test nor the real-stack test may be left out (issue 49)."""
     ros_or_skip()
-    import rospkg
-    path = os.path.join(ROOT, "sharing_layer_cpp", "plugin", "test", "plugin_layer.test")
-    try:
-        rospkg.RosPack().get_path("costmap_2d")
-    except rospkg.ResourceNotFound:
-        reason = runner.missing_requirements(path)
-        assert reason is not None and "costmap_2d" in reason and "plugin_layer_tests" in reason
-    else:
-        pytest.skip("costmap_2d is installed here: the plugin test runs")
+    for rel in ("sharing_layer_cpp/plugin/test/plugin_layer.test", "tests/test/move_base_corridors.test"):
+        assert runner.missing_requirements(os.path.join(ROOT, rel)) is None, rel
+
+
+def test_each_rostest_names_the_host_it_runs_on():
+    ros_or_skip()
+    assert runner.test_host(os.path.join(ROOT, "tests", "test", "move_base_corridors.test")) == \
+        "Stage + upstream move_base"
+    assert runner.test_host(os.path.join(ROOT, "tests", "test", "turn_share.test")) == \
+        "stand-ins: fleet_sim + fleet_nav"
+    assert runner.test_host(os.path.join(ROOT, "sharing_layer_cpp", "plugin", "test", "plugin_layer.test")) == \
+        "no simulator"
+
+
+def test_a_rostest_missing_a_ros_package_fails_unless_allowed(tmp_path, monkeypatch):
+    ros_or_skip()
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    write(pkg, "needs.test", '<arg name="_needs" value="$(find no_such_package_t49)"/>\n'
+          '<test test-name="t" pkg="rostest" type="hztest"/>')
+    monkeypatch.setattr(runner, "discover_rostests", lambda: [str(pkg / "needs.test")])
+    monkeypatch.setattr(runner, "RESULTS", str(tmp_path / "results"))
+    strict = runner.Tally()
+    runner.run_rostests(strict)
+    assert (strict.failed, strict.skipped) == (1, 0) and "no_such_package_t49" in strict.failures[0]
+    lenient = runner.Tally()
+    runner.run_rostests(lenient, allow_missing=True)
+    assert (lenient.failed, lenient.skipped) == (0, 1)
 
 
 def test_a_find_in_an_arg_is_skipped_naming_just_the_package(tmp_path):
@@ -118,24 +139,6 @@ def test_a_find_in_an_arg_is_skipped_naming_just_the_package(tmp_path):
     path = write(tmp_path, "arg.test", '<arg name="_needs" value="$(find no_such_package_s28)"/>\n'
                  '<test test-name="t" pkg="rostest" type="hztest"/>')
     assert runner.missing_requirements(path) == "needs ROS package no_such_package_s28, which is not installed"
-
-
-def test_the_real_stack_test_is_skipped_naming_a_missing_package():
-    """move_base_corridors.test (fleet_launch/move_base_fleet.launch) needs stage_ros, move_base,
-    navfn, base_local_planner, map_server and fake_localization, none of them in Debian."""
-    ros_or_skip()
-    import rospkg
-    needed = ("stage_ros", "move_base", "navfn", "base_local_planner", "map_server", "fake_localization")
-    absent = []
-    for name in needed:
-        try:
-            rospkg.RosPack().get_path(name)
-        except rospkg.ResourceNotFound:
-            absent.append(name)
-    if not absent:
-        pytest.skip("the real stack is installed here: move_base_corridors.test runs")
-    reason = runner.missing_requirements(os.path.join(ROOT, "tests", "test", "move_base_corridors.test"))
-    assert reason in ["needs ROS package %s, which is not installed" % name for name in absent]
 
 
 def test_a_skip_is_counted_and_kept_as_junit(tmp_path):
