@@ -229,10 +229,17 @@ class Simulation:
                 try:
                     scans = []
                     for k, ranger in enumerate(r.spec.rangers):
+                        # As in Stage, a beam hits only robots whose body spans its height.
+                        over = [(o, s) for o, s in zip(self.robots, saved)
+                                if o is not r and not beam_hits_body(r.spec.height, ranger.z, o.spec.height)]
+                        for o, s in over:
+                            grid[o.cells[0], o.cells[1]] = s
                         sx, sy, sth = frames.compose(r.pose, ranger.pose)
                         angles = sth + ranger.beam_angles()
                         ranges = self._raycast(grid, g.resolution, g.origin_x, g.origin_y, sx, sy,
                                                angles, ranger.range_min, ranger.range_max)
+                        for o, _s in over:
+                            grid[o.cells[0], o.cells[1]] = ROBOT_CELL
                         scans.append(np.asarray(ranges, dtype=np.float32))
                     r.scans = scans
                 finally:
@@ -364,3 +371,18 @@ def _convex_overlap(a, b):
             if max(pa) < min(pb) or max(pb) < min(pa):
                 return False
     return True
+
+
+# Stage casts a ranger's beams at the height of its sensor's middle: the ranger sits on top of the robot's
+# body (its size z) plus its own pose z, and its sensor's default 0.02 m box puts the beam 0.01 m above that.
+BEAM_ABOVE_SENSOR_POSE = 0.01
+
+
+def beam_hits_body(robot_height, ranger_z, other_height):
+    """Whether a beam of a ranger at pose z ``ranger_z`` on a body ``robot_height`` tall hits another
+    robot's body ``other_height`` tall (Stage's z test: the beam's height within the body's [0, height]).
+    A world that gives no heights (Stage-3 sizes [x y]: height 0) has every beam hit every robot."""
+    if robot_height <= 0.0 or other_height <= 0.0:
+        return True
+    beam = robot_height + ranger_z + BEAM_ABOVE_SENSOR_POSE
+    return 0.0 <= beam <= other_height

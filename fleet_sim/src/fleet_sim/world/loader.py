@@ -11,7 +11,9 @@ What is read (everything else is ignored with a debug line):
   ``obstacle_return 0`` are not collided with, with ``ranger_return`` < 0 they are
   invisible to lasers;
 - ``position``: a robot (``pose``, ``size``, ``origin``, ``color``, ``name``,
-  ``drive`` "diff" | "omni"); robots are numbered in file order (robot_0 first);
+  ``drive`` "diff" | "omni"); robots are numbered in file order (robot_0 first). A ``position``
+  without a ranger is a movable block (``obstacle_return``, ``ranger_return`` as for ``model``): in
+  Stage a test drives it by cmd_vel, here the block services move it;
 - ``ranger`` inside a robot, with a ``sensor( range [min max] | range_min/range_max,
   fov, samples, pose )``, the Stage-3 ``laser`` model (``range_min``, ``range_max``,
   ``fov``, ``samples`` on the model) or a ranger carrying those properties itself.
@@ -137,6 +139,8 @@ class _Ctx:
         try:
             if ent.type == "model":
                 self.load_model(ent, parent_pose, strict)
+            elif ent.type == "position" and not any(c.type in ("ranger", "laser") for c in ent.children):
+                self.load_movable(ent, parent_pose)
             elif ent.type == "position":
                 self.load_robot(ent, parent_pose)
             elif ent.type in ("ranger", "laser", "sensor"):
@@ -183,6 +187,18 @@ class _Ctx:
             if child.type == "block":
                 continue  # polygon geometry of this model; we use its size rectangle
             self.load_entity(child, pose, strict)
+
+    def load_movable(self, ent, parent_pose):
+        """A position model without a ranger: an object a test moves while the simulation runs (the worlds'
+        blocks: stageros drives them by cmd_vel, fleet_sim by its block services). A block, not a robot:
+        it gets no robot_N number, no scan and no odometry."""
+        self.debug_unused(ent, _USED["position"] | {"obstacle_return", "ranger_return"})
+        name = _string(ent, "name", None) or self.auto_name(ent)
+        self.world.blocks.append(BlockSpec(
+            name=name, pose=frames.compose(parent_pose, _pose(ent)), size=_size(ent),
+            color=_color(ent, (128, 128, 128), self.log),
+            obstacle=_number_prop(ent, "obstacle_return", 1.0) != 0,
+            visible=_number_prop(ent, "ranger_return", 1.0) >= 0, where=ent.where()))
 
     def load_robot(self, ent, parent_pose):
         self.debug_unused(ent, _USED["position"])
