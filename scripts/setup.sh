@@ -17,7 +17,7 @@ PACKAGES=(
   # message packages the nodes use directly
   python3-diagnostic-msgs python3-visualization-msgs python3-std-srvs
   python3-move-base-msgs python3-nav-msgs python3-sensor-msgs python3-geometry-msgs
-  python3-tf2-msgs libdiagnostic-msgs-dev libvisualization-msgs-dev
+  python3-tf2-msgs python3-map-msgs libdiagnostic-msgs-dev libvisualization-msgs-dev
   # the MQTT broker, and Node.js/npm for the Coaty JS interop test
   mosquitto nodejs npm
   # openssl CLI: the TLS tests make a CA and per-robot certificates (coaty_bridge.pki)

@@ -110,7 +110,7 @@ def test_each_rostest_names_the_host_it_runs_on():
     ros_or_skip()
     assert runner.test_host(os.path.join(ROOT, "tests", "test", "move_base_corridors.test")) == \
         "Stage + upstream move_base"
-    assert runner.test_host(os.path.join(ROOT, "tests", "test", "turn_share.test")) == \
+    assert runner.test_host(os.path.join(ROOT, "tests", "test", "turn_share_fleet_sim.test")) == \
         "stand-ins: fleet_sim + fleet_nav"
     assert runner.test_host(os.path.join(ROOT, "sharing_layer_cpp", "plugin", "test", "plugin_layer.test")) == \
         "no simulator"

@@ -3,7 +3,8 @@ import math
 
 import pytest
 
-from fleet_tests.ground_truth import block_corners, distance_to_block, face_recall, precision, visible_face
+from fleet_tests.ground_truth import (SIMULATOR_RASTER, block_corners, distance_to_block, face_recall, on_block,
+                                      precision, visible_face)
 
 RES = 0.05
 # block_short of the two-corridor world: 2.8 m across the corridor, 0.3 m deep, face towards the start at y 5.85
@@ -36,6 +37,17 @@ def test_cells_on_the_face_are_precise_and_cells_in_front_of_it_are_not():
     assert value == pytest.approx(1.0 - 6 / float(len(face) + 6))
     assert sorted(off) == sorted((round(x, 4), round(y, 4)) for x, y in in_front)
     assert math.isnan(precision([], RES, [BLOCK])[0])
+
+
+def test_on_block_allows_half_a_cell_and_one_raster_cell_diagonally_and_no_more():
+    limit = RES * math.sqrt(0.5) + SIMULATOR_RASTER * math.sqrt(2.0)   # 0.0637 m
+    below = 5.85 - limit                                               # the face is at y = 5.85
+    assert on_block(12.9, below + 0.001, RES, BLOCK)
+    assert not on_block(12.9, below - 0.001, RES, BLOCK)
+    # a corner cell as Stage's raster gives it (0.038 m off the corner) counts; issue 26's 0.075 m does not
+    assert on_block(11.5 - 0.027, 5.85 - 0.027, RES, BLOCK)
+    assert not on_block(12.9, 5.85 - 0.075, RES, BLOCK)
+    assert not on_block(12.9, below + 0.001, RES, BLOCK, raster=0.0)
 
 
 def test_a_cell_counted_twice_counts_once():

@@ -253,3 +253,66 @@ def test_every_robot_can_leave_and_park_whatever_the_dispatch_order(layout):
         for ox, oy in goals[:k]:
             grid |= body(ox, oy)
         assert connected(grid, exit_cell, cell(gx, gy)), "bench_goals[%d] cannot be reached" % k
+
+
+# --- the robot's body against move_base's footprint (issue 49) ----------------------------------
+
+def footprint_of_config():
+    """move_base's footprint polygon and the largest padding the costmaps add (config/move_base)."""
+    config = os.path.join(os.path.dirname(WORLDS), "config", "move_base")
+    with open(os.path.join(config, "costmap_common_params.yaml")) as f:
+        common = yaml.safe_load(f)
+    with open(os.path.join(config, "global_costmap_params.yaml")) as f:
+        global_pad = yaml.safe_load(f)["global_costmap"].get("footprint_padding", 0.0)
+    return [tuple(p) for p in common["footprint"]], max(common.get("footprint_padding", 0.0), global_pad)
+
+
+def inside_polygon(x, y, polygon, tolerance=1e-9):
+    """Point in (or on the edge of) a convex polygon given counterclockwise or clockwise."""
+    signs = []
+    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]):
+        cross = (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0)
+        if abs(cross) > tolerance:
+            signs.append(cross > 0)
+    return all(signs) or not any(signs)
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_the_simulated_body_lies_within_move_bases_footprint(layout):
+    """Stage stops a turn that moves the body into a wall; move_base plans with the footprint. A body that
+    reaches beyond the footprint (the tutorials' origin -0.05 put its rear corners 0.05 m outside) lets
+    move_base command a turn Stage refuses, for ever (issue 49)."""
+    footprint, _padding = footprint_of_config()
+    for robot in load(layout, 2).robots:
+        (sx, sy), (ox, oy) = robot.size, robot.origin
+        corners = [(ox + dx * sx / 2, oy + dy * sy / 2) for dx in (-1, 1) for dy in (-1, 1)]
+        outside = [c for c in corners if not inside_polygon(c[0], c[1], footprint)]
+        assert not outside, "%s of %s: body corners %s outside the footprint %s" % (robot.name, layout, outside,
+                                                                                   footprint)
+
+
+def test_a_body_reaching_past_the_footprint_is_caught():
+    footprint, _ = footprint_of_config()
+    assert inside_polygon(-0.325, 0.325, footprint)
+    assert not inside_polygon(-0.375, 0.325, footprint)   # the old rear corner, origin -0.05
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_every_corridor_leaves_room_for_the_robot_turning_in_place(layout):
+    """A robot turning in place sweeps the circle of its padded footprint's farthest corner; every corridor is
+    wider than that circle with 0.1 m to spare on each side (the dead end's door, as wide as its block, too)."""
+    footprint, padding = footprint_of_config()
+    swept = 2 * (max(math.hypot(x, y) for x, y in footprint) + padding) + 2 * 0.1
+    for name, (x0, _y0, x1, _y1) in facility(layout)["corridors"].items():
+        assert x1 - x0 >= swept, "%s corridor %s: %.2f m wide, the robot needs %.2f" % (layout, name, x1 - x0, swept)
+    if layout == "deadend":
+        door = facility(layout)["blocks"]["block_far"]["size"][0] - 0.2   # the block reaches 0.1 m into each jamb
+        assert door >= swept, "the dead end's door: %.2f m wide, the robot needs %.2f" % (door, swept)
+
+
+def test_the_worlds_raster_is_the_one_ground_truth_allows_for():
+    from fleet_tests.ground_truth import SIMULATOR_RASTER
+    for layout in LAYOUTS:
+        with open(os.path.join(WORLDS, layout + ".inc")) as f:
+            lines = [line.split() for line in f if line.startswith("resolution")]
+        assert lines == [["resolution", repr(SIMULATOR_RASTER)]], layout

@@ -28,9 +28,17 @@ def distance_to_block(x, y, block):
     return math.hypot(du, dv)
 
 
-def on_block(x, y, resolution, block):
-    """Whether the cell centred at (x, y) touches the block: within half a cell's diagonal of it."""
-    return distance_to_block(x, y, block) <= resolution * math.sqrt(0.5) + 1e-9
+# Stage (and fleet_sim) rasterise every model on the world's grid (make_facility_world writes `resolution 0.02`),
+# filling each raster cell the model touches, and a beam stops at the first filled one: a beam can end up to one
+# raster cell's diagonal outside the model's nominal rectangle (seen at the blocks' corners, 0.035-0.039 m from
+# them with the costmap's 0.05 m cells). The misplacements this rule exists to catch are 0.075 m and more.
+SIMULATOR_RASTER = 0.02
+
+
+def on_block(x, y, resolution, block, raster=SIMULATOR_RASTER):
+    """Whether the cell centred at (x, y) touches the block as the simulator draws it: within half a cell's
+    diagonal plus one raster cell's diagonal of its rectangle."""
+    return distance_to_block(x, y, block) <= (resolution * math.sqrt(0.5) + raster * math.sqrt(2.0)) + 1e-9
 
 
 def precision(cells, resolution, blocks):

@@ -7,6 +7,12 @@ latest costmap; and the a-priori map (/map). It sends move_base goals, changes t
 blocks and reads the handlers' obstacle lists. ``BrokerCounters`` reads mosquitto's $SYS byte
 counters. Only observation: obstacles travel between robots through
 MQTT alone (fleet.launch), the test node never forwards anything.
+
+The same scenarios run on both hosts, named by the launch's /fleet/simulator: "stage" (stageros
+with upstream move_base, move_base_fleet.launch) or "fleet_sim" (our stand-ins, fleet.launch).
+Blocks move through fleet_sim's services there and through ``stage_blocks.BlockDriver`` on Stage;
+the robots' views are fleet_nav's snapshots there and drawings of move_base's global costmap on
+Stage.
 """
 import math
 import os
@@ -19,14 +25,19 @@ import rospy
 import yaml
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
+from map_msgs.msg import OccupancyGridUpdate
 from move_base_msgs.msg import MoveBaseAction, RecoveryStatus
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from std_msgs.msg import Empty, String
+from std_srvs.srv import Empty as EmptySrv
 
 from fleet_sim.srv import AddBlock, MoveBlock, RemoveBlock, Snapshot
 from fleet_nav.goals import move_base_goal
 from sharing_msgs.msg import RobotFootprintArray, SharedObstacle
 from sharing_msgs.srv import ListObstacles
+
+from fleet_tests import stage_blocks
+from fleet_tests.run_picture import draw_costmap, draw_run
 
 STATE_NAMES = {v: k for k, v in GoalStatus.__dict__.items() if k.isupper() and isinstance(v, int)}
 
@@ -153,9 +164,16 @@ class Robot:
         rospy.Subscriber(ns + "to_fleet", SharedObstacle, self._append(self.to_fleet), queue_size=1000)
         rospy.Subscriber(ns + "from_fleet", SharedObstacle, self._append(self.from_fleet), queue_size=1000)
         rospy.Subscriber(ns + "expired_obstacles", String, self._on_expired, queue_size=100)
+        # fleet_nav's plan, and upstream move_base's (navfn's)
         rospy.Subscriber(ns + "plan", Path, self._on_plan, queue_size=10)
+        rospy.Subscriber(ns + "move_base/NavfnROS/plan", Path, self._on_plan, queue_size=10)
         rospy.Subscriber(ns + "base_pose_ground_truth", Odometry, self._on_pose, queue_size=10)
+        # fleet_nav's global costmap, and upstream move_base's (published where publish_frequency > 0)
         rospy.Subscriber(ns + "global_costmap/costmap", OccupancyGrid, self._on_costmap, queue_size=1)
+        rospy.Subscriber(ns + "move_base/global_costmap/costmap", OccupancyGrid, self._on_costmap, queue_size=1)
+        # move_base sends its whole costmap once, then only the windows that changed
+        rospy.Subscriber(ns + "move_base/global_costmap/costmap_updates", OccupancyGridUpdate,
+                         self._on_costmap_update, queue_size=10)
         rospy.Subscriber(ns + "fleet_robots", RobotFootprintArray, self._on_fleet_robots, queue_size=2)
         rospy.Subscriber(ns + "obstacle_proposals", SharedObstacle, self._wall(self.proposals_wall), queue_size=100)
         rospy.Subscriber(ns + "shared_obstacles", SharedObstacle, self._wall(self.layer_in_wall), queue_size=1000)
@@ -226,6 +244,28 @@ class Robot:
         with self.lock:
             self.costmap = msg
 
+    def _on_costmap_update(self, update):
+        """Applies one of costmap_2d's window updates to the latest whole costmap (a copy: readers keep theirs)."""
+        with self.lock:
+            grid = self.costmap
+            if grid is None:
+                return
+            width, height = grid.info.width, grid.info.height
+            if update.x + update.width > width or update.y + update.height > height or \
+                    len(update.data) != update.width * update.height:
+                rospy.logwarn("scenario: %s: costmap update %dx%d at (%d, %d) outside the %dx%d costmap, ignored",
+                              self.name, update.width, update.height, update.x, update.y, width, height)
+                return
+            data = list(grid.data)
+            for row in range(update.height):
+                start = (update.y + row) * width + update.x
+                data[start:start + update.width] = update.data[row * update.width:(row + 1) * update.width]
+            fresh = OccupancyGrid()
+            fresh.header = update.header
+            fresh.info = grid.info
+            fresh.data = data
+            self.costmap = fresh
+
     def wait_ready(self, timeout):
         if not self.client.wait_for_server(rospy.Duration(timeout)):
             raise ScenarioError("%s/move_base action server not up after %.0f s" % (self.name, timeout))
@@ -261,16 +301,50 @@ class Robot:
         with self.lock:
             return [(t, m) for t, m in self.to_fleet if m.version == 1 and m.source == self.name]
 
+    def forget_own_observations(self):
+        """Resets the robot's obstacle layers, keeping the shared obstacles (the sharing layer's reset): upstream
+        move_base's clear_costmaps service. fleet_nav resets its obstacle layer at every goal reached, so there
+        it has been done already."""
+        if self.fleet.simulator == "stage":
+            rospy.ServiceProxy("/%s/move_base/clear_costmaps" % self.name, EmptySrv)()
+
     def snapshot(self, path):
-        return self.snapshot_srv(path, False, 40.0)
+        """This robot's view saved as a PNG; an object whose .message says where (or why not)."""
+        if self.fleet.simulator == "fleet_sim":
+            return self.snapshot_srv(path, False, 40.0)
+        with self.lock:
+            costmap = self.costmap
+        if costmap is None:
+            return Outcome(False, "%s: no global costmap received (move_base publishes it only with "
+                                  "global_costmap/publish_frequency > 0)" % self.name)
+        try:
+            draw_costmap(path, costmap, "%s's global costmap" % self.name)
+        except (OSError, ValueError) as err:
+            return Outcome(False, "%s: %s" % (self.name, err))
+        return Outcome(True, "%s's view: %s" % (self.name, path))
+
+
+class Outcome:
+    """What a picture request gave: like fleet_sim's Snapshot response (success, message)."""
+
+    def __init__(self, success, message):
+        self.success, self.message = success, message
 
 
 class Fleet:
     def __init__(self, robots=2, facility=None):
         self.lock = threading.Lock()
         self.facility = facility or load_facility()
+        # "stage" (move_base_fleet.launch) or "fleet_sim" (fleet.launch): who moves the blocks
+        self.simulator = rospy.get_param("/fleet/simulator", "fleet_sim")
+        if self.simulator not in ("stage", "fleet_sim"):
+            raise ScenarioError("/fleet/simulator must be stage or fleet_sim, got %r" % (self.simulator,))
         self.robots = [Robot(self, i) for i in range(robots)]
         self.map = None          # the map server's /map (latched): the a-priori map
+        self.stage_blocks = stage_blocks.BlockDriver(sorted(self.facility["blocks"])) \
+            if self.simulator == "stage" else None
+        self.removed = set()     # blocks taken away (fleet_sim) or parked in a wall (Stage)
+        self.moved = {}          # name -> (x, y, yaw) of blocks put elsewhere (fleet_sim)
         self._add = rospy.ServiceProxy("/fleet_sim/add_block", AddBlock)
         self._move = rospy.ServiceProxy("/fleet_sim/move_block", MoveBlock)
         self._remove = rospy.ServiceProxy("/fleet_sim/remove_block", RemoveBlock)
@@ -328,26 +402,92 @@ class Fleet:
     def wait_ready(self, timeout=120.0):
         for r in self.robots:
             r.wait_ready(timeout)
-        for s in ("/fleet_sim/add_block", "/fleet_sim/remove_block", "/fleet_sim/snapshot"):
-            rospy.wait_for_service(s, timeout)
+        if self.simulator == "fleet_sim":
+            for s in ("/fleet_sim/add_block", "/fleet_sim/remove_block", "/fleet_sim/snapshot"):
+                rospy.wait_for_service(s, timeout)
+        else:
+            for name in self.facility["blocks"]:
+                self.stage_blocks.pose(name, timeout)
+            self.wait_until(lambda: self.map is not None, timeout, "the map server's /map")
         if rospy.get_param("/robot_0/move_base/sharing_enabled", True):
             for r in self.robots:
                 rospy.wait_for_service(r.list_srv.resolved_name, timeout)
 
+    def block_size(self, name):
+        try:
+            return tuple(float(v) for v in self.facility["blocks"][name]["size"])
+        except KeyError:
+            raise ScenarioError("unknown block %r; blocks: %s" % (name, ", ".join(sorted(self.facility["blocks"])))) \
+                from None
+
     def remove_block(self, name):
-        resp = self._remove(name)
-        if not resp.success:
-            raise ScenarioError("remove_block %s refused: %s" % (name, resp.message))
+        """Takes the block away: fleet_sim removes it; on Stage it is driven into a wall, out of every view."""
+        if self.simulator == "fleet_sim":
+            resp = self._remove(name)
+            if not resp.success:
+                raise ScenarioError("remove_block %s refused: %s" % (name, resp.message))
+        else:
+            with self.lock:
+                grid = self.map
+            try:
+                where = self.stage_blocks.park(name, self.block_size(name), stage_blocks.map_occupancy(grid))
+            except stage_blocks.BlockError as err:
+                raise ScenarioError(str(err)) from None
+            rospy.loginfo("scenario: block %s driven into the wall at (%.2f, %.2f)", name, where[0], where[1])
+        with self.lock:
+            self.removed.add(name)
+            self.moved.pop(name, None)
         rospy.loginfo("scenario: block %s removed", name)
 
     def add_block(self, name, x, y, yaw, sx, sy):
-        resp = self._add(name, x, y, yaw, sx, sy)
-        if not resp.success:
-            raise ScenarioError("add_block %s refused: %s" % (name, resp.message))
+        """Puts a block (back) at (x, y, yaw). On Stage the world's block is driven there, so the size must be
+        the world's."""
+        if self.simulator == "fleet_sim":
+            resp = self._add(name, x, y, yaw, sx, sy)
+            if not resp.success:
+                raise ScenarioError("add_block %s refused: %s" % (name, resp.message))
+        else:
+            size = self.block_size(name)
+            if abs(size[0] - sx) > 1e-6 or abs(size[1] - sy) > 1e-6:
+                raise ScenarioError("add_block %s: Stage cannot resize the world's %.2f x %.2f m block to "
+                                    "%.2f x %.2f m" % (name, size[0], size[1], sx, sy))
+            try:
+                self.stage_blocks.place(name, (x, y, yaw))
+            except stage_blocks.BlockError as err:
+                raise ScenarioError(str(err)) from None
+        with self.lock:
+            self.removed.discard(name)
+            self.moved[name] = (x, y, yaw)
         rospy.loginfo("scenario: block %s added at (%.2f, %.2f, %.2f rad)", name, x, y, yaw)
 
+    def present_blocks(self):
+        """The blocks in the world now, as ground_truth takes them: [{"pose": [x, y, yaw], "size": [sx, sy]}].
+        On Stage their poses are Stage's ground truth; on fleet_sim what the scenario put where."""
+        out = []
+        for name, b in sorted(self.facility["blocks"].items()):
+            with self.lock:
+                if name in self.removed:
+                    continue
+                pose = self.moved.get(name)
+            if self.simulator == "stage":
+                pose = self.stage_blocks.pose(name)
+            out.append({"name": name, "pose": list(pose or b["pose"]), "size": list(self.block_size(name))})
+        return out
+
     def world_snapshot(self, path, pixels_per_metre=40.0):
-        return self._snapshot(path, True, pixels_per_metre)
+        if self.simulator == "fleet_sim":
+            return self._snapshot(path, True, pixels_per_metre)
+        with self.lock:
+            grid = self.map
+            trails = {r.name: list(r.track) for r in self.robots}
+        if grid is None:
+            return Outcome(False, "no /map received: no picture of the world")
+        facility = dict(self.facility, blocks={b["name"]: b for b in self.present_blocks()})
+        try:
+            draw_run(path, grid, facility, trails, [], "the world (Stage ground truth)")
+        except (OSError, ValueError) as err:
+            return Outcome(False, "world picture: %s" % err)
+        return Outcome(True, "the world: %s" % path)
 
     def wait_until(self, predicate, timeout, what, period=0.2):
         """Waits (simulated time) until predicate() is true; raises ScenarioError naming what."""
