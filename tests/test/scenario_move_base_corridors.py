@@ -30,8 +30,9 @@ import rostest
 from nav_msgs.msg import Path
 from rosgraph_msgs.msg import Log
 
+from fleet_tests.ground_truth import distance_to_block, precision
 from fleet_tests.run_picture import draw_run
-from fleet_tests.scenario import Fleet, ScenarioError, entered, load_facility, wait_for_sim_time
+from fleet_tests.scenario import Fleet, ScenarioError, cell_centre, entered, load_facility, wait_for_sim_time
 
 
 class MoveBaseCorridors(unittest.TestCase):
@@ -132,6 +133,7 @@ class MoveBaseCorridors(unittest.TestCase):
 
         self.outcome = "robot_1 %s%s" % (result1[1], " in %.1f s" % time1 if time1 is not None else "")
         if self.sharing:
+            self.assert_every_shared_cell_on_the_block()
             self.assertEqual([], inside[:5], "robot_1, sent after the share, entered the blocked short corridor %s "
                              "(first poses shown)" % (short,))
             for t, plan in plans:
@@ -140,6 +142,28 @@ class MoveBaseCorridors(unittest.TestCase):
             self.assertTrue(plans, "no plan of robot_1 seen on move_base/NavfnROS/plan")
         self.assertTrue(result1[0] and result1[1] == "SUCCEEDED", "robot_1 did not reach goal_1: %s %s; at %s"
                         % (result1[1], result1[2], r1.pose))
+
+    def assert_every_shared_cell_on_the_block(self):
+        """Every cell either robot marked in a message it sent (first shares and follow-up updates) lies on
+        the block where Stage has it (precision 1 against ground truth, per message: issue 49)."""
+        blocks = self.fleet.present_blocks()
+        with self.fleet.lock:
+            sent = [(t, r.name, m) for r in self.fleet.robots for t, m in r.to_fleet if m.source == r.name
+                    and m.marked_indexes]
+        off = []
+        cells = 0
+        for t, name, m in sent:
+            points = [cell_centre(m, i) for i in m.marked_indexes]
+            cells += len(points)
+            share, missed = precision(points, m.resolution, blocks)
+            if missed:
+                off.append("%s v%d from %s at %.1f s: %d of %d cells off the block, e.g. (%.2f, %.2f), %.2f m away"
+                           % (m.uuid[:8], m.version, name, t, len(missed), len(points), missed[0][0], missed[0][1],
+                              min(distance_to_block(missed[0][0], missed[0][1], b) for b in blocks)))
+        rospy.loginfo("move_base_corridors: PRECISION %d messages, %d marked cells, %d messages with cells off the "
+                      "block", len(sent), cells, len(off))
+        self.assertTrue(sent, "no message with marked cells was sent")
+        self.assertEqual([], off, "shared cells in free space (against Stage's ground truth)")
 
     def draw(self):
         path = rospy.get_param("~picture", "")
