@@ -72,9 +72,14 @@ void readLayerConfig(const ros::NodeHandle& nh, double footprint_inscribed, cons
   nh.param("robot_exclusion_margin", c.fleet.margin, 0.2);
   nh.param("robot_timeout", c.fleet.timeout, 3.0);
   nh.param("fleet_robots_topic", c.fleet_robots_topic, std::string("fleet_robots"));
+  // Odometry against localisation: how much they may disagree before nothing is shared.
+  nh.param("max_correction_speed", c.localisation.max_speed, 0.25);
+  nh.param("max_correction_turn", c.localisation.max_turn, 0.25);
+  nh.param("correction_window", c.localisation.window, 1.0);
   c.params.strategy = parseProposalStrategy(strategy);
   c.params.validate();
   c.fleet.validate();
+  c.localisation.validate();
 }
 
 std::vector<std::string> adoptParentObservationSources(const std::string& layer_name)

@@ -8,6 +8,7 @@
 
 #include "sharing_layer/fleet_robots.h"
 #include "sharing_layer/layer_params.h"
+#include "sharing_layer/localisation_watch.h"
 
 namespace sharing_layer
 {
@@ -16,6 +17,7 @@ struct LayerConfig
 {
   LayerParams params;                ///< the core's parameters (ranges, triggers, evidence, leases)
   FleetRobotParams fleet;            ///< robot_exclusion_margin, robot_timeout
+  LocalisationLimits localisation;   ///< max_correction_speed, max_correction_turn, correction_window
   bool inscribed_from_footprint = true;  ///< ~inscribed_radius not set: follow the footprint
   std::string plan_topics;           ///< space-separated; "none" or empty switches the plan trigger off
   std::string map_topic;             ///< the a-priori map, for its unknown cells

@@ -218,6 +218,7 @@ void SharingLayer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
     status.mergeSummary(DiagnosticStatus::WARN, "an observation source is not current (no recent data)");
   }
   diagnosePlanAndMap(status);
+  diagnoseLocalisation(status);
   // Counts.
   status.add("proposals published", proposals_published_);
   status.add("updates published", updates_published_);

@@ -92,6 +92,13 @@ void SharingLayer::onInitialize()
   private_namespace_ = private_nh.getNamespace();
   map_topic_ = config.map_topic == "none" ? std::string() : config.map_topic;
   global_frame_ = layered_costmap_->getGlobalFrameID();
+  localisation_watch_.setLimits(config.localisation);  // validated with the rest
+  {
+    // The costmap's namespace holds robot_base_frame (Costmap2DROS's default: base_link).
+    const std::size_t slash = name_.rfind('/');
+    ros::NodeHandle costmap_nh(slash == std::string::npos ? "~" : "~/" + name_.substr(0, slash));
+    costmap_nh.param("robot_base_frame", robot_base_frame_, std::string("base_link"));
+  }
   warnAboutSetup(adopted, private_nh.getNamespace());
   wireTopics(config);
   ROS_INFO("SharingLayer %s (%s): fleet robots from [%s] are never shared (footprint + %.2f m, forgotten after "
@@ -439,6 +446,7 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
     return;
   }
   useExtraBounds(min_x, min_y, max_x, max_y);
+  watchLocalisation();
   std::vector<SourceObservation> observations;
   current_ = sourceObservations(observations);
 
@@ -454,7 +462,11 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
   {
     processObservation(source_observation, now, robot_x, robot_y, min_x, min_y, max_x, max_y);
   }
-  if (stuck_pending_)
+  if (stuck_pending_ && !localisation_steady_)
+  {
+    ++triggers_withheld_;  // kept pending: acted on once odometry and localisation agree again
+  }
+  else if (stuck_pending_)
   {
     stuck_pending_ = false;
     if (rolling_window_)
@@ -509,17 +521,24 @@ void SharingLayer::processObservation(const SourceObservation& source_observatio
     ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): sensor origin (%.2f, %.2f) is off the map; not clearing",
                       params_.robot_name.c_str(), observation.origin_.x, observation.origin_.y);
   }
-  if (!rolling_window_)  // its cell indexes would be those of a grid that moves with the robot
+  if (!rolling_window_ && !localisation_steady_)
+  {
+    // Placed through a localisation that disagrees with the odometry, this scan's marks may lie where nothing is:
+    // nothing of it goes to the fleet (its marks and clears stay in this costmap, as ObstacleLayer's would).
+    updates_withheld_ += outcome.updates.size();
+    triggers_withheld_ += static_pending_ ? 0 : 1;
+  }
+  else if (!rolling_window_)  // its cell indexes would be those of a grid that moves with the robot
   {
     for (const ObstacleUpdate& update : outcome.updates)
     {
       updates_pub_.publish(toMessage(update, global_frame_));
       ++updates_published_;
     }
-  }
-  if (!static_pending_ && !rolling_window_)  // without the a-priori map every wall looks new
-  {
-    handleTrigger(core_->checkPlan(robot_x, robot_y, now), now);
+    if (!static_pending_)  // without the a-priori map every wall looks new
+    {
+      handleTrigger(core_->checkPlan(robot_x, robot_y, now), now);
+    }
   }
   // What the scan touched, as ObstacleLayer grows its bounds (the origin, the beams up to raytrace_range, the marked
   // points), not a box of the range around the sensor: every later layer works over this.

@@ -24,6 +24,7 @@
 #include <sharing_layer_cpp/SharingLayerConfig.h>
 
 #include "sharing_layer/bit_grid.h"
+#include "sharing_layer/localisation_watch.h"
 #include "sharing_layer/sharing_core.h"
 #include "layer_config.h"
 
@@ -78,6 +79,12 @@ public:
   bool mapReceived();
   /// @brief Poses of the plan the plan trigger follows (0: none).
   std::size_t planPoses();
+  /// @brief Shared obstacles the core holds (0 before the core exists).
+  std::size_t sharedObstacleCount();
+  /// @brief Whether odometry and localisation agree (localisation_watch.h): sharing goes on only then.
+  bool localisationAgrees();
+  /// @brief Monitoring updates not sent because odometry and localisation disagreed.
+  std::size_t updatesWithheld();
   /// @brief Bytes the layer keeps per grid cell besides ObstacleLayer's grid, summed over the grid: the core's
   /// (SharingCore::perCellBytes) and the a-priori map's unknown cells it keeps to hand to a new or moved core.
   std::size_t perCellBytes();
@@ -170,6 +177,19 @@ private:
   static constexpr std::size_t kMaxPreStaticScans = 100;
   ros::Time stuck_stamp_;
   std::string global_frame_;
+  // Odometry against localisation (localisation.cpp, core/localisation_watch.h): while they disagree the layer
+  // marks and clears as ObstacleLayer does but proposes nothing and sends no monitoring update.
+  void watchLocalisation();
+  bool findOdometryFrame();
+  void diagnoseLocalisation(diagnostic_updater::DiagnosticStatusWrapper& status);
+  LocalisationWatch localisation_watch_;
+  std::string robot_base_frame_;           ///< the costmap's robot_base_frame
+  std::string odometry_frame_;             ///< the frame below global_frame_ on the way to it ("" until found)
+  bool odometry_frame_none_ = false;       ///< the robot hangs straight from global_frame_: nothing to compare
+  bool localisation_steady_ = true;
+  std::size_t updates_withheld_ = 0;       ///< monitoring updates not sent while the two disagreed
+  std::size_t triggers_withheld_ = 0;      ///< plan checks and stuck signals not acted on meanwhile
+  std::size_t disagreements_ = 0;          ///< times they started to disagree
   ros::Publisher proposals_pub_;
   ros::Publisher updates_pub_;
   ros::Subscriber stuck_sub_;
