@@ -376,6 +376,14 @@ def build(pins, sources, build_dir, jobs):
         raise UpstreamError("the build ended without %s (see %s)" % (", ".join(absent), logfile))
 
 
+def current_key(cache):
+    """The key `current` points to, or None."""
+    try:
+        return os.readlink(os.path.join(cache, "current"))
+    except OSError:
+        return None
+
+
 def point_current(cache, key):
     link = os.path.join(cache, "current")
     temporary = link + ".new"
@@ -385,10 +393,13 @@ def point_current(cache, key):
     os.replace(temporary, link)
 
 
-def remove_other_builds(cache, key):
+def remove_other_builds(cache, keep):
+    """Removes every keyed build but those in `keep`: the new one and the one it replaces, which shells and
+    workspaces set up before the switch still use until they source scripts/env.sh and build again."""
     for name in os.listdir(cache):
         path = os.path.join(cache, name)
-        if name != key and os.path.isdir(path) and not os.path.islink(path) and re.fullmatch(r"[0-9a-f]{16}", name):
+        if name not in keep and os.path.isdir(path) and not os.path.islink(path) and \
+                re.fullmatch(r"[0-9a-f]{16}", name):
             shutil.rmtree(path, ignore_errors=True)
 
 
@@ -470,8 +481,9 @@ def build_locked(pins, cache, key, jobs):
     with open(os.path.join(build_dir, "COMPLETE"), "w") as f:
         json.dump({"key": key, "built": time.strftime("%Y-%m-%d %H:%M:%S"), "minutes": round(minutes, 1),
                    "pins": {p.name: p.commit for p in pins}}, f, indent=1)
+    previous = current_key(cache)
     point_current(cache, key)
-    remove_other_builds(cache, key)
+    remove_other_builds(cache, {key, previous})
     log("done in %.1f min: %s (scripts/env.sh overlays it)" % (minutes, build_dir))
     return 0
 

@@ -239,3 +239,15 @@ def test_a_cached_complete_build_is_reused_without_building(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "built before" in proc.stdout
     assert os.readlink(str(tmp_path / "cache" / "current")) == bu.cache_key()
+
+
+def test_a_new_build_keeps_the_one_it_replaces_and_removes_older_ones(tmp_path):
+    cache = str(tmp_path)
+    for key in ("a" * 16, "b" * 16, "c" * 16):
+        fill(os.path.join(cache, key))
+    bu.point_current(cache, "b" * 16)
+    previous = bu.current_key(cache)
+    bu.point_current(cache, "c" * 16)
+    bu.remove_other_builds(cache, {"c" * 16, previous})
+    assert sorted(n for n in os.listdir(cache) if n != "current") == ["b" * 16, "c" * 16]
+    assert bu.current_key(cache) == "c" * 16
