@@ -195,7 +195,7 @@ def main(argv=None):
     import rospy
     from fleet_tests.bench import crossed_mouth
     from fleet_tests.ground_truth import on_block, run_figures
-    from fleet_tests.scenario import Fleet, ScenarioError, cell_centre, load_facility, wait_for_sim_time
+    from fleet_tests.scenario import Fleet, ScenarioError, cell_centre, fleet_sharing, load_facility, wait_for_sim_time
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--delay", type=float, required=True, help="simulated s from the leader finding the block "
@@ -214,7 +214,7 @@ def main(argv=None):
     except ScenarioError as err:
         print("lifecycle: %s" % err)
         return 1
-    sharing = bool(rospy.get_param("/robot_0/move_base/sharing_enabled", True))
+    sharing = fleet_sharing()
     leader, follower = fleet.robots
     block = fleet.facility["blocks"]["block_short"]
     short = fleet.corridor("short")

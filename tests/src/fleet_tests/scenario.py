@@ -42,6 +42,11 @@ from fleet_tests.run_picture import draw_costmap, draw_run
 STATE_NAMES = {v: k for k, v in GoalStatus.__dict__.items() if k.isupper() and isinstance(v, int)}
 
 
+def fleet_sharing():
+    """Whether the fleet runs with sharing: /fleet/sharing (both fleet launches), else fleet_nav's own setting."""
+    return bool(rospy.get_param("/fleet/sharing", rospy.get_param("/robot_0/move_base/sharing_enabled", True)))
+
+
 class ScenarioError(Exception):
     """A scenario step could not be carried out (bad goal name, service refused, ...)."""
 
@@ -155,6 +160,7 @@ class Robot:
         self.costmap = None
         self.proposals_wall = []  # (wall time, SharedObstacle) this robot's layer proposed
         self.layer_in_wall = []   # (wall time, SharedObstacle) the handler gave this robot's layer
+        self.layer_in = []        # (sim time, SharedObstacle) the same, in simulated time
         self.bridge_stats = {}    # latest coaty_bridge /diagnostics values
         self.pose = None
         self.distance = 0.0
@@ -176,7 +182,7 @@ class Robot:
                          self._on_costmap_update, queue_size=10)
         rospy.Subscriber(ns + "fleet_robots", RobotFootprintArray, self._on_fleet_robots, queue_size=2)
         rospy.Subscriber(ns + "obstacle_proposals", SharedObstacle, self._wall(self.proposals_wall), queue_size=100)
-        rospy.Subscriber(ns + "shared_obstacles", SharedObstacle, self._wall(self.layer_in_wall), queue_size=1000)
+        rospy.Subscriber(ns + "shared_obstacles", SharedObstacle, self._on_layer_in, queue_size=1000)
         self.client = GoalClient(ns + "move_base", MoveBaseAction)
         self.list_srv = rospy.ServiceProxy(ns + "list_obstacles", ListObstacles)
         self.snapshot_srv = rospy.ServiceProxy(ns + "move_base/snapshot", Snapshot)
@@ -192,6 +198,12 @@ class Robot:
             with self.lock:
                 target.append((time.time(), msg))
         return cb
+
+    def _on_layer_in(self, msg):
+        wall, sim = time.time(), rospy.get_time()
+        with self.lock:
+            self.layer_in_wall.append((wall, msg))
+            self.layer_in.append((sim, msg))
 
     def _on_stuck(self, _msg):
         with self.lock:
@@ -409,9 +421,14 @@ class Fleet:
             for name in self.facility["blocks"]:
                 self.stage_blocks.pose(name, timeout)
             self.wait_until(lambda: self.map is not None, timeout, "the map server's /map")
-        if rospy.get_param("/robot_0/move_base/sharing_enabled", True):
+        if fleet_sharing():
             for r in self.robots:
                 rospy.wait_for_service(r.list_srv.resolved_name, timeout)
+            # A robot's layer never shares the robots its bridge hears; one that moves before the others' footprint
+            # adverts reached it may see them as obstacles (robot_1 shared robot_0 1.3 s after the start of Test 1).
+            names = {r.name for r in self.robots}
+            self.wait_until(lambda: all(names - {r.name} <= set(r.fleet_robot_names()) for r in self.robots),
+                            timeout, "every robot's bridge to hear every other robot's footprint")
 
     def block_size(self, name):
         try:
