@@ -152,8 +152,18 @@ def test_stage_display_none_runs_stageros_without_a_window(stand_ins):
     ("obstacle_duration:=0", "obstacle_duration_must_be_at_least_1_second"),
     ("layout:=nowhere", "layout_must_be_facility_deadend_or_corridors"),
     ("stage_display:=window", "stage_display_must_be_xvfb_screen_or_none"),
+    ("speedup:=0", "speedup_must_be_above_0"),
+    ("speedup:=-1", "speedup_must_be_above_0"),
 ])
 def test_bad_argument_is_refused_with_its_name(stand_ins, arg, name):
     rc, out = roslaunch(stand_ins, "--nodes", "fleet_launch", "move_base_fleet.launch", arg)
     assert rc != 0, out
     assert name in out, out
+
+
+def test_speedup_reaches_stage_through_stage_world(stand_ins):
+    rc, out = roslaunch(stand_ins, "--args", "/stageros", "fleet_launch", "move_base_fleet.launch", "speedup:=2.5")
+    assert rc == 0, out
+    assert "/stage_world --speedup 2.5 -u " in out, out
+    rc, out = roslaunch(stand_ins, "--args", "/stageros", "fleet_launch", "move_base_fleet.launch")
+    assert "/stage_world --speedup 1 -u " in out, out
