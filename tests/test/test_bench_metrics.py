@@ -2,6 +2,7 @@
 layouts' goals files: crossing a blocked corridor's mouth, the seeded dispatch, obstacles after
 merging and which were robots or walls, and the broker's $SYS byte accounting."""
 import importlib.machinery
+import math
 import importlib.util
 import os
 
@@ -223,7 +224,7 @@ def test_bench_defaults_are_the_launch_files():
 def test_thesis_nav_params_are_printed_as_non_defaults():
     bf = load_bench_fleet()
     path = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "config", "fleet_nav_thesis.yaml")
-    args = bf.make_parser().parse_args(["--nav-params", path])
+    args = bf.make_parser().parse_args(["--host", "fleet_sim", "--nav-params", path])
     lines = bf.non_defaults(args)
     assert lines[0].startswith("nav_params: " + path)
     assert "move_base stuck_feedback_on_local_failure: True (default False)" in lines
@@ -257,3 +258,24 @@ def test_chart_refuses_rows_without_a_complete_seed(tmp_path):
         bf.chart([bench_row(2, True, 1, [50.0]), (2, False, 1, None)], str(tmp_path / "c.png"), "test")
     assert bf.draw_chart([(2, True, 1, None)], str(tmp_path / "c.png"), bf.make_parser().parse_args([])) == 1
     assert not (tmp_path / "c.png").exists()
+
+
+def test_on_stage_the_non_defaults_are_the_tutorials_multi_robot_rate_and_what_the_bench_changed():
+    bf = load_bench_fleet()
+    lines = bf.non_defaults(bf.make_parser().parse_args(["--host", "stage", "--layout", "deadend", "--speedup", "2",
+                                                          "--obstacle-duration", "600"]))
+    assert lines[0].startswith("move_base controller_frequency: 10")
+    assert any(line.startswith("obstacle_duration: 600 s") for line in lines)
+    assert any(line.startswith("Stage speedup 2") for line in lines)
+    assert not any("speedup" in line for line in bf.non_defaults(bf.make_parser().parse_args(["--host", "stage"])))
+
+
+def test_the_on_off_interval_is_students_t_over_the_seeds_and_none_for_one_seed():
+    bf = load_bench_fleet()
+    mean, low, high = bf.ratio_interval([0.8, 0.9, 1.0])
+    assert mean == pytest.approx(0.9)
+    assert (high - mean) == pytest.approx(4.302653 * 0.1 / math.sqrt(3), rel=1e-4)   # t(0.975, 2 df)
+    assert low == pytest.approx(2 * mean - high)
+    mean, low, high = bf.ratio_interval([0.8])
+    assert mean == 0.8 and math.isnan(low) and math.isnan(high)
+    assert math.isnan(bf.ratio_interval([float("nan")])[0])

@@ -216,6 +216,32 @@ def broker_bytes(base, end, robots, own_bytes=0):
 # ---------------------------------------------------------------------------------------------
 # The run
 
+def thin(track, period):
+    """The points of a track [(t, x, y)] at least `period` s apart (the first and the last kept)."""
+    out = []
+    for point in track:
+        if not out or point[0] - out[-1][0] >= period:
+            out.append(point)
+    if track and out[-1] is not track[-1]:
+        out.append(track[-1])
+    return out
+
+
+def knew_block(fleet, blocks):
+    """{robot: sim time} at which each robot first knew of a block: the first shared obstacle with a cell on one
+    that its layer got (from its handler: its own share or a peer's), or None."""
+    from fleet_tests.ground_truth import on_block
+    from fleet_tests.scenario import cell_centre
+    out = {}
+    for robot in fleet.robots:
+        with fleet.lock:
+            got = list(robot.layer_in)
+        times = [t for t, m in got if m.marked_indexes and any(
+            on_block(*cell_centre(m, i), m.resolution, b) for i in m.marked_indexes for b in blocks.values())]
+        out[robot.name] = round(min(times), 2) if times else None
+    return out
+
+
 def robot_radius_param():
     """Circumscribed radius of robot_0's padded footprint (the navigation tutorials'), else its
     robot_radius: the "footprint radius" of the robot test."""
@@ -228,7 +254,8 @@ def robot_radius_param():
 
 def main(argv=None):
     import rospy
-    from fleet_tests.scenario import BrokerCounters, Fleet, ScenarioError, cell_centre, load_facility, wait_for_sim_time
+    from fleet_tests.scenario import (BrokerCounters, Fleet, ScenarioError, cell_centre, fleet_sharing, load_facility,
+                                      wait_for_sim_time)
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", type=int, required=True)
@@ -254,7 +281,7 @@ def main(argv=None):
     except ScenarioError as err:
         print("bench: %s" % err)
         return 1
-    sharing = bool(rospy.get_param("/robot_0/move_base/sharing_enabled", True))
+    sharing = fleet_sharing()
     counters, base = None, None
     if sharing:
         try:
@@ -264,6 +291,7 @@ def main(argv=None):
             print("bench: broker byte counters: %s" % err)
             return 1
     plan = dispatch_plan(args.robots, args.seed, args.interval)
+    started_sim, started_wall = rospy.get_time(), time.time()
     sent, dispatch, goal_of = {}, [], {}
     for k, (index, wait) in enumerate(plan):
         robot = fleet.robots[index]
@@ -283,6 +311,7 @@ def main(argv=None):
         if finished and state == "SUCCEEDED":
             results[robot.name] = done - sent[robot.name]
         print("[bench N=%d seed %d] %s: %s %s" % (args.robots, args.seed, robot.name, state, text), flush=True)
+    ended_sim, ended_wall = rospy.get_time(), time.time()
     # time to goal: the first track point near the goal after dispatch, else when the result came
     times = {}
     for robot in fleet.robots:
@@ -337,6 +366,16 @@ def main(argv=None):
                         tracks, blocks, corridors, (tolerance + 1) * (grid.info.resolution if grid else 0.05), walls)
     out = {
         "robots": args.robots,
+        "realtime_factor": (ended_sim - started_sim) / max(1e-6, ended_wall - started_wall),
+        "sim_s": ended_sim - started_sim,
+        "wall_s": ended_wall - started_wall,
+        "simulator": fleet.simulator,
+        "tracks": {name: [[round(t, 2), round(x, 3), round(y, 3)] for t, x, y in thin(track, 0.5)]
+                   for name, track in tracks.items()},
+        "shares": [{"t": round(t, 2), "robot": name, "uuid": m.uuid, "version": m.version,
+                    "cells": [[round(x, 3), round(y, 3)] for x, y in (cell_centre(m, i) for i in m.marked_indexes)]}
+                   for name, t, m in to_fleet if m.source == name and m.marked_indexes],
+        "knew_block": knew_block(fleet, blocks),
         "seed": args.seed,
         "sharing": sharing,
         "dispatch": dispatch,
