@@ -5,12 +5,16 @@
 # configured anew; otherwise sharing_layer_cpp would stay built without its costmap_2d plugin.
 set -eo pipefail
 cd "$(dirname "$0")/.."
+# The underlay alone (upstream and the distribution), not a workspace chain the calling shell sourced before:
+# catkin records what it finds at configure time, and a stale chain would come first.
+unset CMAKE_PREFIX_PATH ROS_PACKAGE_PATH PYTHONPATH LD_LIBRARY_PATH PKG_CONFIG_PATH ROSLISP_PACKAGE_DIRECTORIES
+export FLEET_ENV_UPSTREAM_ONLY=1
 # shellcheck disable=SC1091
 source scripts/env.sh
+unset FLEET_ENV_UPSTREAM_ONLY
 JOBS="${JOBS:-2}"
 WS=catkin_ws
-own_devel="$(pwd)/$WS/devel"
-underlay="$(tr ":" "\n" <<<"${CMAKE_PREFIX_PATH:-}" | grep -vxF "$own_devel" | grep -v "^$" | sort -u | paste -sd: -)"
+underlay="$(tr ":" "\n" <<<"${CMAKE_PREFIX_PATH:-}" | grep -v "^$" | sort -u | paste -sd: -)"
 stamp="$WS/build/fleet_underlay"
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" != "$underlay" ]; then
   echo "build: the underlay changed (was: $(cat "$stamp"); now: ${underlay:-none}); configuring $WS anew"

@@ -8,18 +8,24 @@ if [ -z "${ROS_DISTRO:-}" ] && [ -f /opt/ros/noetic/setup.bash ]; then
   # shellcheck disable=SC1091
   source /opt/ros/noetic/setup.bash
 fi
-# The upstream navigation stack and Stage that `make setup` built where the distribution lacks
-# them (upstream/README.md); only a complete build is ever sourced.
+# The upstream navigation stack and Stage that `make setup` built where the distribution lacks them
+# (upstream/README.md); only a complete build is ever sourced. This workspace, once built, carries the chain
+# of workspaces it was built on (that upstream build): sourcing it alone gives exactly that chain, where
+# sourcing both with --extend would put a stale chain first after a new upstream build.
 export FLEET_UPSTREAM_CACHE="${FLEET_UPSTREAM_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/fleet_upstream}"
-if [ -f "$FLEET_UPSTREAM_CACHE/current/COMPLETE" ] && [ -f "$FLEET_UPSTREAM_CACHE/current/devel_isolated/setup.bash" ]; then
+_fleet_upstream="$FLEET_UPSTREAM_CACHE/current"
+if [ -f "$REPO_ROOT/catkin_ws/devel/setup.bash" ] && [ -z "${FLEET_ENV_UPSTREAM_ONLY:-}" ]; then
   # shellcheck disable=SC1091
-  source "$FLEET_UPSTREAM_CACHE/current/devel_isolated/setup.bash" --extend
-fi
-if [ -f "$REPO_ROOT/catkin_ws/devel/setup.bash" ]; then
-  # --extend: this workspace goes first, on top of whatever the lines above sourced.
+  source "$REPO_ROOT/catkin_ws/devel/setup.bash"
+  if [ -f "$_fleet_upstream/COMPLETE" ] && \
+     ! tr ':' '\n' <<<"${CMAKE_PREFIX_PATH:-}" | grep -q "^$(cd "$_fleet_upstream" && pwd -P)/"; then
+    echo "env.sh: catkin_ws was built on another upstream build than $(cd "$_fleet_upstream" && pwd -P); run 'make build'" >&2
+  fi
+elif [ -f "$_fleet_upstream/COMPLETE" ] && [ -f "$_fleet_upstream/devel_isolated/setup.bash" ]; then
   # shellcheck disable=SC1091
-  source "$REPO_ROOT/catkin_ws/devel/setup.bash" --extend
+  source "$_fleet_upstream/devel_isolated/setup.bash" --extend
 fi
+unset _fleet_upstream
 # One host by default: every node, master and broker on loopback. On a fleet of several hosts set
 # ROS_IP (or ROS_HOSTNAME) and ROS_MASTER_URI to this host's address before sourcing this file.
 export ROS_IP="${ROS_IP:-127.0.0.1}"
