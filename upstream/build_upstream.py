@@ -305,7 +305,8 @@ def run_logged(cmd, logfile, cwd, env, on_line=None):
     with open(logfile, "a", encoding="utf-8") as out:
         out.write("\n$ %s\n" % " ".join(cmd))
         out.flush()
-        proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        # PWD too: catkin_make_isolated takes it for the workspace and writes .catkin_workspace there
+        proc = subprocess.Popen(cmd, cwd=cwd, env=dict(env, PWD=cwd), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True, errors="replace")
         tail = []
         for line in proc.stdout:
