@@ -66,13 +66,19 @@ def test_the_removed_table_counts_stale_detours_and_the_deletion_after_a_robot_l
     cleared = {"remove_after_s": 30.0, "stale_detour": False, "stale_detour_s": 0.0,
                "verification": {"spread_s": 0.4, "costmaps_free": {"robot_0": True, "robot_1": True},
                                 "receipts": {"end_to_last_drop_s": 0.1, "end_to_last_drop_wall_s": 0.0123}}}
-    lines = bench.removed_table([(150, 1, stale), (150, 2, cleared), (630, 1, None)])
-    assert "| 120 s | 1/2 | 120 | 0.40 (1/2 runs) | 0.10 / 12 (1/2 runs) | 1/2 |" in lines
+    stale.update(follower_time_to_goal=80.0, follower_distance_m=40.0)
+    # the same seed's follower with sharing off knew nothing and drove the short way
+    reference = {"follower_time_to_goal": 50.0, "follower_distance_m": 26.0}
+    lines = bench.removed_table([(150, 1, stale), (150, 2, cleared), (630, 1, None)], {(150, 1): reference})
+    assert "| 120 s | 1/2 | +30.0 s, +14.0 m (1 of them) | 0.40 (1/2 runs) | 0.10 / 12 (1/2 runs) | 1/2 |" in lines
     assert "| 630 s | no result | | | | |" in lines
+    # a stale detour without a sharing-off run to compare with says so; no detour says none
+    lines = bench.removed_table([(150, 1, stale)])
+    assert "| 120 s | 1/1 | no sharing-off run to compare with |" in lines[-1]
     # a run from before the receipts (no "receipts" in its verification) is not measured, not an error
     old = {"remove_after_s": 30.0, "stale_detour": False, "stale_detour_s": 0.0,
            "verification": {"spread_s": 1.1, "costmaps_free": {"robot_0": True, "robot_1": True}}}
-    assert "| 120 s | 0/1 | 0 | 1.10 (1/1 runs) | not measured | 1/1 |" in bench.removed_table([(150, 1, old)])
+    assert "| 120 s | 0/1 | none | 1.10 (1/1 runs) | not measured | 1/1 |" in bench.removed_table([(150, 1, old)])
 
 
 # Receipt timelines: (sim time, wall time, kind, marked, cleared, version, source).

@@ -263,6 +263,7 @@ def main(argv=None):
         "follower_rediscovered": removed_at is None and (bool(follower_on_block) if sharing else entered),
         "follower_reached": result[1] == "SUCCEEDED",
         "follower_time_to_goal": (rospy.get_time() - follower_sent) if result[1] == "SUCCEEDED" else None,
+        "follower_distance_m": sum(((b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2) ** 0.5 for a, b in zip(track, track[1:])),
         "leader_reached": leader_result[1] == "SUCCEEDED",
         "obstacle_duration_s": rospy.get_param("/robot_0/sharing_handler/obstacle_duration", None),
         "ground_truth": run_figures([m for m in messages if removed_at is None or m[0] < removed_at],
