@@ -223,8 +223,10 @@ def test_host(path):
         config = roslaunch.config.load_config_default([path], None, verbose=False)
     except Exception:  # noqa: BLE001 - an unreadable launch: rostest reports it
         return "unknown"
-    packages = {node.package for node in list(config.nodes) + list(config.tests)}
-    if "stage_ros" in packages:
+    nodes = list(config.nodes) + list(config.tests)
+    packages = {node.package for node in nodes}
+    # fleet_launch's stage_world runs stageros (at a speed of its own)
+    if "stage_ros" in packages or any(n.package == "fleet_launch" and n.type == "stage_world" for n in nodes):
         return "Stage + upstream move_base" if "move_base" in packages else "Stage"
     if "fleet_sim" in packages:
         return "stand-ins: fleet_sim + fleet_nav" if "fleet_nav" in packages else "stand-in fleet_sim"
