@@ -46,6 +46,8 @@ def build_parser():
     g.add_argument("--resolution", type=float, help="metres per pixel of --map-image")
     g.add_argument("--origin", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"),
                    help="lower-left corner of --map-image in the map frame (default 0 0)")
+    g.add_argument("--allow-map-mismatch", action="store_true",
+                   help="replay on the given map even where it is not the bag's /map (resolution, origin, size)")
     g = p.add_argument_group("topics and frames")
     g.add_argument("--scan-topic", default="base_scan",
                    help="LaserScan topic: relative (default base_scan: every <ns>/base_scan is a robot) or absolute")
@@ -59,6 +61,9 @@ def build_parser():
     g.add_argument("--plan-topics", default="move_base/NavfnROS/plan,move_base/GlobalPlanner/plan",
                    help="comma-separated nav_msgs/Path topics (relative to each namespace) for the layer's "
                         "plan-blocked trigger; 'none' switches it off (default: move_base's navfn and global_planner)")
+    g.add_argument("--no-robot-exclusion", action="store_true",
+                   help="for comparison only: share the bag's other robots too, as a layer without the fleet's "
+                        "robot exclusion would (default: they are placed from tf and never shared)")
     g.add_argument("--trigger-at", type=_trigger_at, default=[], action="append",
                    help="extra triggers, seconds from the bag start: '19.5,robot_1@40' (repeatable)")
     g = p.add_argument_group("layer and handler parameters")
@@ -130,9 +135,10 @@ class Progress:
 
 
 def settings_from_args(args):
-    from sharing_replay.config import ReplaySettings, layer_kwargs_from_tree, load_params_tree
+    from sharing_replay.config import ReplaySettings, exclusion_from_tree, layer_kwargs_from_tree, load_params_tree
     tree = load_params_tree(args.params, args.param)
     layer, lethal, unknown, _unused = layer_kwargs_from_tree(tree)
+    exclusion = exclusion_from_tree(tree)
     for key in ("obstacle_range", "raytrace_range", "static_tolerance", "trigger_debounce", "proposal_strategy"):
         value = getattr(args, key)
         if value is not None:
@@ -148,7 +154,8 @@ def settings_from_args(args):
         tf_max_gap=args.tf_max_gap, tf_tolerance=args.tf_tolerance, tf_wait=args.tf_wait,
         obstacle_duration=args.obstacle_duration, expiry_rate=args.expiry_rate,
         max_cells_per_message=args.max_cells_per_message, wall_distance=args.wall_distance, layer=layer,
-        lethal_cost_threshold=lethal, track_unknown_space=unknown, seed=args.seed)
+        lethal_cost_threshold=lethal, track_unknown_space=unknown, seed=args.seed,
+        robot_exclusion=not args.no_robot_exclusion, allow_map_mismatch=args.allow_map_mismatch, **exclusion)
 
 
 def run(argv=None, stdout=sys.stdout, stderr=sys.stderr):

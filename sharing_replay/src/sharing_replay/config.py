@@ -37,6 +37,11 @@ class MapData:
         return int(self.occupancy.shape[0])
 
 
+#: move_base's default footprint where no parameter gives one: a circle of robot_radius 0.46 m plus
+#: footprint_padding 0.01 m, as fleet_nav.params builds it (a 16-gon)
+DEFAULT_FOOTPRINT = NavParams.from_dict({})[0].footprint_polygon
+
+
 @dataclass(frozen=True)
 class ReplaySettings:
     scan_topic: str = "base_scan"
@@ -60,6 +65,14 @@ class ReplaySettings:
     lethal_cost_threshold: int = 100
     track_unknown_space: bool = False
     seed: int = 0
+    # Fleet robots are never shared (the layer's FleetRobots): the bag's other robots, placed from tf, with
+    # their recorded footprint or this one (robot frame; fleet_nav's footprint_polygon), plus the margin.
+    robot_exclusion: bool = True
+    robot_exclusion_margin: float = 0.2
+    robot_timeout: float = 3.0
+    footprint: Tuple[Tuple[float, float], ...] = DEFAULT_FOOTPRINT
+    # a --map that is not the bag's /map (resolution, origin, size) is refused unless this is set
+    allow_map_mismatch: bool = False
 
     def __post_init__(self):
         def positive(name, allow_zero=False):
@@ -88,6 +101,10 @@ class ReplaySettings:
             value = getattr(self, name)
             if not isinstance(value, str) or not value.strip("/"):
                 raise InputError("%s must be a non-empty name, got %r" % (name, value))
+        positive("robot_timeout", allow_zero=True)
+        positive("robot_exclusion_margin", allow_zero=True)
+        if len(self.footprint) < 1 or not all(len(p) == 2 and all(math.isfinite(v) for v in p) for p in self.footprint):
+            raise InputError("footprint must be a list of finite [x, y] points, got %r" % (self.footprint,))
         for robot, t in self.trigger_at:
             if not math.isfinite(t) or t < 0:
                 raise InputError("--trigger-at time must be >= 0 seconds from the bag start, got %r" % t)
@@ -138,6 +155,17 @@ def load_params_tree(paths, overrides):
     return tree
 
 
+def exclusion_from_tree(tree):
+    """The fleet-robot exclusion's settings (ReplaySettings keywords) via fleet_nav's reader: footprint
+    (padded, or a 16-gon of robot_radius), robot_exclusion_margin, robot_timeout."""
+    try:
+        params, _unused = NavParams.from_dict(tree)
+    except ParameterError as err:
+        raise InputError("bad parameter: %s" % err) from None
+    return dict(footprint=tuple(params.footprint_polygon), robot_exclusion_margin=params.robot_exclusion_margin,
+                robot_timeout=params.robot_timeout)
+
+
 def layer_kwargs_from_tree(tree):
     """(layer kwargs, lethal_cost_threshold, track_unknown_space, unused keys) via fleet_nav's reader."""
     try:
@@ -170,6 +198,30 @@ def load_map(map_yaml=None, map_image=None, resolution=None, origin=(0.0, 0.0, 0
                          % m.origin[2])
     return MapData(np.ascontiguousarray(m.data), float(m.resolution), float(m.origin[0]), float(m.origin[1]),
                    os.path.abspath(map_yaml or map_image))
+
+
+#: how far a given map's origin may lie from the bag's /map's (m): far below a cell, above float rounding
+ORIGIN_TOLERANCE = 1e-3
+#: relative difference of resolutions taken as equal (float32 on the wire holds about 7 digits)
+RESOLUTION_TOLERANCE = 1e-6
+
+
+def describe_map(m):
+    return "%g m/cell, origin (%g, %g), %d x %d cells" % (m.resolution, m.origin_x, m.origin_y, m.size_x, m.size_y)
+
+
+def map_differences(given, recorded):
+    """What differs between two maps' grids (resolution, origin, size), as lines; [] when they are one grid."""
+    out = []
+    if abs(given.resolution - recorded.resolution) > RESOLUTION_TOLERANCE * recorded.resolution:
+        out.append("resolution %g m/cell, the bag's %g" % (given.resolution, recorded.resolution))
+    if max(abs(given.origin_x - recorded.origin_x), abs(given.origin_y - recorded.origin_y)) > ORIGIN_TOLERANCE:
+        out.append("origin (%g, %g), the bag's (%g, %g)" % (given.origin_x, given.origin_y, recorded.origin_x,
+                                                            recorded.origin_y))
+    if (given.size_x, given.size_y) != (recorded.size_x, recorded.size_y):
+        out.append("size %d x %d cells, the bag's %d x %d" % (given.size_x, given.size_y, recorded.size_x,
+                                                              recorded.size_y))
+    return out
 
 
 def map_from_message(msg, topic):

@@ -12,11 +12,12 @@ EXIT_USAGE = 2          # bad command line, parameters or map: nothing replayed
 EXIT_BAG_UNREADABLE = 3  # the bag cannot be opened at all
 EXIT_NO_SCANS = 4        # no LaserScan topic to replay (missing topic)
 BIT_BAG_DAMAGED = 8      # truncated/unindexed bag, unreadable chunks, messages that do not deserialise
-BIT_TF = 16              # scans dropped: tf gap, extrapolation, frame not connected to the global frame
+BIT_TF = 16              # scans dropped for tf (gap, extrapolation, frame not connected to the global frame), or
+#                          a robot of the bag never found in tf (so the others' layers could not exclude it)
 BIT_INPUT = 32           # a trigger or tf topic missing, scans with bad content, tf with bad values
 
 _BAG_COUNTERS = ("bag_unindexed", "damaged_chunks", "lost_messages", "bad_message")
-_TF_COUNTERS = ("scans_tf_gap", "scans_tf_extrapolation", "scans_tf_unconnected")
+_TF_COUNTERS = ("scans_tf_gap", "scans_tf_extrapolation", "scans_tf_unconnected", "robots_never_placed")
 _INPUT_COUNTERS = ("scans_bad", "tf_rejected")
 
 
@@ -125,9 +126,21 @@ def summarise(replay, bag_path):
                        "tf_max_gap": s.tf_max_gap, "tf_tolerance": s.tf_tolerance, "trigger": s.trigger,
                        "plan_topics": list(s.plan_topics)},
         "obstacles": obstacles,
+        "trigger_sources": {name: list(found) for name, found in sorted(replay.trigger_sources.items())},
+        "robot_exclusion": robot_exclusion(replay),
     }
     summary["exit_code"] = exit_code(replay)
     return summary
+
+
+def robot_exclusion(replay):
+    """Which of the bag's robots every layer excluded, with which footprint, and how often one had no pose."""
+    others = replay.others
+    if others is None:
+        return {"on": replay.settings.robot_exclusion, "robots": {}}
+    return {"on": True, "margin": replay.settings.robot_exclusion_margin, "timeout": replay.settings.robot_timeout,
+            "robots": {name: others.footprint_source(name) for name in sorted(others.frames)},
+            "unplaced_scans": dict(sorted(others.unplaced.items()))}
 
 
 def summary_text(summary):
@@ -149,6 +162,20 @@ def summary_text(summary):
             summary["scans_processed"], summary["scans_dropped"], summary["scans_per_second"],
             summary["real_time_factor"], summary["wall_seconds"]),
     ]
+    exclusion = summary["robot_exclusion"]
+    if exclusion["robots"]:
+        groups = [(label, [r for r, source in exclusion["robots"].items() if source == key])
+                  for key, label in (("recorded footprint", "footprint recorded"),
+                                     ("parameters", "footprint of the parameters"))]
+        lines.append("other robots never shared: %s (placed from tf; %s; margin %g m)" % (
+            ", ".join(exclusion["robots"]), "; ".join("%s: %s" % (label, ", ".join(names))
+                                                       for label, names in groups if names), exclusion["margin"]))
+    elif not exclusion["on"]:
+        lines.append("other robots: NOT excluded (--no-robot-exclusion): robots in view may be shared")
+    silent = [name for name, found in summary["trigger_sources"].items() if not found]
+    if silent:
+        lines.append("no trigger or plan in the bag for %s: nothing can be proposed from %s" % (
+            ", ".join(silent), "it" if len(silent) == 1 else "them"))
     for obstacle in summary["obstacles"]:
         lines.append("  %s %s t=%.1f s rect %s: %d cells (%d now), %d near walls, %d updates" % (
             obstacle["uuid"][:8], obstacle["robot"], obstacle["t"], obstacle["rectangle"], obstacle["cells_ever"],

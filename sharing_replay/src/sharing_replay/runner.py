@@ -25,55 +25,13 @@ import uuid as uuidlib
 import numpy as np
 
 from sharing_layer_cpp import core
-from sharing_replay.config import map_from_message, static_costs
-from sharing_replay.errors import InputError, MissingTopicError, TransformError
+from sharing_replay.config import describe_map, map_differences, map_from_message, static_costs
+from sharing_replay.errors import InputError, TransformError
+from sharing_replay.other_robots import OtherRobots
+from sharing_replay.sources import discover_robots, find_other_robots, find_triggers, robot_name_of, source_frame
 from sharing_replay.tf_chain import TransformChain, yaw_of
 
 LOG = logging.getLogger(__name__)
-
-TRIGGER_TOPICS = {"stuck_feedback": "stuck_feedback", "recovery_status": "move_base/recovery_status"}
-
-
-def _join(ns, name):
-    return "/" + "/".join(p for p in (ns.strip("/"), name.strip("/")) if p)
-
-
-def _frame(ns, name):
-    return "/".join(p for p in (ns.strip("/"), name.strip("/")) if p)
-
-
-def robot_name_of(ns, single_name):
-    """The handler's naming: namespace without slashes, nested a/b -> a_b."""
-    ns = ns.strip("/")
-    return ns.replace("/", "_") if ns else single_name
-
-
-def discover_robots(topics, settings):
-    """{namespace: scan topic} of the LaserScan topics that match settings.scan_topic.
-
-    Raises InputError listing what the bag has when nothing matches (missing topic)."""
-    scans = {t: typ for t, (typ, _n) in topics.items() if typ == "sensor_msgs/LaserScan"}
-    wanted = settings.scan_topic
-    found = {}
-    if wanted.startswith("/"):
-        if wanted in scans:
-            found[wanted.rsplit("/", 1)[0].strip("/")] = wanted
-    else:
-        suffix = "/" + wanted.strip("/")
-        for topic in scans:
-            if topic.endswith(suffix):
-                found[topic[: -len(suffix)].strip("/")] = topic
-    if settings.robots:
-        missing = [r for r in settings.robots if r.strip("/") not in found]
-        if missing:
-            raise MissingTopicError("no %s topic for robot namespace(s) %s; LaserScan topics in the bag: %s"
-                             % (wanted, ", ".join(missing), ", ".join(sorted(scans)) or "none"))
-        found = {r.strip("/"): found[r.strip("/")] for r in settings.robots}
-    if not found:
-        raise MissingTopicError("missing topic: no sensor_msgs/LaserScan topic matches %r; LaserScan topics in "
-                         "the bag: %s (choose one with --scan-topic)" % (wanted, ", ".join(sorted(scans)) or "none"))
-    return found
-
 
 class _Robot:
     """One robot's layer core, handler and event queue."""
@@ -86,7 +44,7 @@ class _Robot:
         self.ns = ns
         self.name = robot_name_of(ns, s.single_robot_name)
         self.scan_topic = scan_topic
-        self.base_frame = _frame(ns, s.base_frame)
+        self.base_frame = source_frame(ns, s.base_frame)
         m = replay.map
         self.geometry = core.GridGeometry(m.resolution, m.origin_x, m.origin_y, m.size_x, m.size_y)
         self.handler_geometry = Geometry(m.resolution, m.origin_x, m.origin_y, m.size_x, m.size_y)
@@ -95,6 +53,7 @@ class _Robot:
         except (TypeError, ValueError) as err:
             raise InputError("bad layer parameter: %s" % err) from None
         self.core = core.SharingCore(self.geometry, params)
+        self.core.fleet_robots.set_params(margin=s.robot_exclusion_margin, timeout=s.robot_timeout)
         self.core.set_static_map(replay.static)
         # Unknown map cells (and cells near them) are never shared, as in the plugin.
         self.core.set_unknown_map(np.ascontiguousarray(m.occupancy == -1))
@@ -208,6 +167,10 @@ class _Robot:
         replay.scans += 1
         if self.scans % 10 == 1:
             self.path.append((sx, sy))
+        if replay.others is not None:
+            # The other robots where they are at this scan: never shared, as the live fleet's layers
+            # never share the robots their bridges hear of.
+            self.core.fleet_robots.replace_all(replay.others.placed(stamp, self.name))
         outcome = self.core.process_scan((sx, sy, sz), points, stamp)
         if not outcome.origin_in_map:
             replay.count("scans_origin_off_map")
@@ -271,6 +234,9 @@ class Replay:
         self.start_time = 0.0
         self.end_time = 0.0
         self.robots = {}
+        self.others = None           # OtherRobots: every robot of the bag, for the fleet-robot exclusion
+        self.footprint_topics = {}   # recorded footprint topic -> robot name
+        self.trigger_sources = {}    # robot name -> the trigger and plan topics found for it
         self.problems = collections.Counter()
         self.frames_failed = collections.defaultdict(collections.Counter)   # reason -> frame -> count
         self.notes = collections.defaultdict(list)                         # counter -> first lines
@@ -399,67 +365,77 @@ class Replay:
         s = self.settings
         topics = source.topics()
         found = discover_robots(topics, s)
+        bag_map = self._bag_map(source, topics)
         if self.map is None:
-            map_topic = "/map"
-            if map_topic not in topics:
+            if bag_map is None:
                 raise InputError("no map: give --map <map.yaml> or --map-image <image> --resolution <m>; the bag "
-                                 "has no /map topic either")
-            for _topic, msg, _t in source.messages([map_topic]):
-                self.map = map_from_message(msg, map_topic)
-                break
-            if self.map is None:
-                raise InputError("no map: the bag's /map topic could not be read; give --map")
+                                 "has no /map topic either" if "/map" not in topics else
+                                 "no map: the bag's /map topic could not be read; give --map")
+            self.map = bag_map
+        elif bag_map is not None:
+            self._check_map(bag_map)
         self.static = np.ascontiguousarray(static_costs(self.map, s.lethal_cost_threshold, s.track_unknown_space))
         for ns in sorted(found):
             robot = _Robot(self, ns, found[ns])
             if robot.name in {r.name for r in self.robots.values()}:
                 raise InputError("two namespaces give the robot name %r" % robot.name)
             self.robots[found[ns]] = robot
-        # Triggers.
-        self.trigger_topics = {}
-        kinds = {"auto": ("stuck_feedback", "recovery_status"), "both": ("stuck_feedback", "recovery_status"),
-                 "stuck_feedback": ("stuck_feedback",), "recovery_status": ("recovery_status",),
-                 "none": ()}[s.trigger]
-        for robot in self.robots.values():
-            present = []
-            for kind in kinds:
-                topic = _join(robot.ns, TRIGGER_TOPICS[kind])
-                if topic in topics:
-                    self.trigger_topics[topic] = (robot, kind)
-                    present.append(topic)
-                elif s.trigger != "auto":
-                    self.missing_topics.append(topic)
-            if s.trigger == "auto" and not present and not s.trigger_at:
-                self.missing_topics.append(" or ".join(_join(robot.ns, TRIGGER_TOPICS[k]) for k in kinds))
-        for topic in self.missing_topics:
-            LOG.warning("missing topic %s: no trigger from it, so nothing is proposed from it "
-                        "(use --trigger-at to trigger by time)", topic)
-        by_name = {r.name: r for r in self.robots.values()}
-        self.timed_triggers = []
-        for name, t in s.trigger_at:
-            if name is None:
-                targets = list(self.robots.values())
-            elif name in by_name:
-                targets = [by_name[name]]
-            else:
-                raise InputError("--trigger-at names robot %r; robots in the bag: %s"
-                                 % (name, ", ".join(sorted(by_name))))
-            for robot in targets:
-                self.timed_triggers.append((source.start_time + t, robot))
-        self.timed_triggers.sort(key=lambda item: item[0])
-        self.plan_topics = {}
-        for robot in self.robots.values():
-            for name in s.plan_topics:
-                topic = _join(robot.ns, name)
-                if topic in topics:
-                    self.plan_topics[topic] = robot
+        self._prepare_others(topics)
+        self._prepare_triggers(source, topics)
         self.tf_topics = [t for t in ("/tf", "/tf_static") if t in topics]
         if not self.tf_topics:
             self.missing_topics.append("/tf")
             LOG.warning("missing topic /tf: no scan can be placed in %s", s.global_frame)
-        replayed = list(self.robots) + list(self.trigger_topics) + list(self.plan_topics) + self.tf_topics
+        replayed = (list(self.robots) + list(self.trigger_topics) + list(self.plan_topics) + self.tf_topics
+                    + list(self.footprint_topics))
         self.total_messages = sum(topics[t][1] for t in replayed)
         return replayed
+
+    def _bag_map(self, source, topics):
+        """The bag's latched /map (the first one), or None when it has none. An unusable one is an error
+        only when it is the map to replay on; beside a given map it is noted and not compared."""
+        if "/map" not in topics:
+            return None
+        for _topic, msg, _t in source.messages(["/map"]):
+            try:
+                return map_from_message(msg, "/map")
+            except InputError as err:
+                if self.map is None:
+                    raise
+                self.note("bag_map_unusable", "the bag's /map cannot be compared with the map given: %s" % err)
+                return None
+        return None
+
+    def _check_map(self, bag_map):
+        """A map given on the command line must be the grid the bag was recorded on: else every cell
+        index (static filter, shares, near-wall counts) means another place."""
+        differences = map_differences(self.map, bag_map)
+        if not differences:
+            return
+        line = ("the map given (%s: %s) is not the bag's /map (%s): %s"
+                % (self.map.source, describe_map(self.map), describe_map(bag_map), "; ".join(differences)))
+        if not self.settings.allow_map_mismatch:
+            raise InputError(line + ". Give the map the bag was recorded with (or leave --map out to use the "
+                             "bag's), or --allow-map-mismatch to replay on the given map anyway")
+        self.count("map_mismatch")
+        self.note("map_mismatch", line + " (--allow-map-mismatch: replayed on the given map)")
+
+    def _prepare_others(self, topics):
+        """Every robot of the bag (not only those replayed), placed for the others' layers."""
+        if not self.settings.robot_exclusion:
+            return
+        frames, self.footprint_topics = find_other_robots(topics, self.settings)
+        if len(frames) > 1:
+            s = self.settings
+            self.others = OtherRobots(self.chain, s.global_frame, frames, s.footprint, s.robot_timeout)
+
+    def _prepare_triggers(self, source, topics):
+        found = find_triggers(self.robots.values(), topics, self.settings, source.start_time)
+        self.trigger_topics, self.plan_topics, self.timed_triggers, self.trigger_sources, missing = found
+        self.missing_topics += missing
+        for topic in missing:
+            LOG.warning("missing topic %s: no trigger from it, so nothing is proposed from it "
+                        "(use --trigger-at to trigger by time)", topic)
 
     # --- run ------------------------------------------------------------------------------------
     def run(self, source):
@@ -492,6 +468,11 @@ class Replay:
                     self.chain.add(transform, static=static)
             elif topic in self.plan_topics:
                 self.plan_topics[topic].queue.append(("plan", msg, t))
+            elif topic in self.footprint_topics:
+                problem = self.others.on_footprint(self.footprint_topics[topic], msg)
+                if problem:
+                    self.count("footprints_bad")
+                    self.note("footprints_bad", problem)
             else:
                 trigger = self.trigger_topics.get(topic)
                 if trigger is not None:
@@ -517,6 +498,13 @@ class Replay:
                 self.notes["bag"].append(line)
         if self.chain.rejected:
             self.problems["tf_rejected"] = self.chain.rejected
+        if self.others is not None:
+            for name in sorted(self.others.frames):
+                if name in self.others.unplaced and name not in self.others.last:
+                    self.count("robots_never_placed")
+                    self.note("robots_never_placed", "%s: no pose of %s in %s anywhere in the bag: the other robots' "
+                              "layers could not exclude it (--base-frame?)" % (name, self.others.frames[name],
+                                                                              self.settings.global_frame))
         self.wall_seconds = time.monotonic() - wall_start
         if self.on_progress is not None:
             self.on_progress(self, self.wall_seconds, final=True)
