@@ -71,8 +71,9 @@ class Bus:
         sub(NS + "to_fleet", SharedObstacle, self._rec(self.fleet), queue_size=1000)
         sub(NS + "expired_obstacles", String, lambda m: self._rec(self.expired)(m.data), queue_size=100)
         sub(NS + "shared_obstacle_list", SharedObstacleArray, self._on_list, queue_size=10)
+        # fleet_obstacle_markers is subscribed late, in test_06b (a late subscriber's first, latched array)
+        self.first_markers = None
         self.markers = None
-        sub(NS + "fleet_obstacle_markers", MarkerArray, self._on_markers, queue_size=10)
         sub("/diagnostics", DiagnosticArray, self._on_diag, queue_size=100)
         sub("/rosout", Log, self._on_rosout, queue_size=1000)
         self.proposals = rospy.Publisher(NS + "obstacle_proposals", SharedObstacle, queue_size=100)
@@ -97,10 +98,18 @@ class Bus:
         self.list = msg
 
     def _on_markers(self, msg):
+        with self.lock:
+            if self.first_markers is None:
+                self.first_markers = msg
         self.markers = msg
 
-    def labels(self):
-        return [m.text for m in self.markers.markers if m.ns == "fleet_obstacles/labels"] if self.markers else []
+    def subscribe_markers(self):
+        self.first_markers = None
+        rospy.Subscriber(NS + "fleet_obstacle_markers", MarkerArray, self._on_markers, queue_size=10)
+
+    def labels(self, array=None):
+        array = array or self.markers
+        return [m.text for m in array.markers if m.ns == "fleet_obstacles/labels"] if array else []
 
     def _on_diag(self, msg):
         for status in msg.status:
@@ -255,6 +264,13 @@ class TestHandlerNode(unittest.TestCase):
 
     def test_06b_the_fleets_obstacles_are_drawn_for_rviz_with_source_age_time_left_and_cells(self):
         bus = self.bus
+        # Nobody has looked at the markers so far: a late subscriber (RViz started now) gets the obstacles
+        # held now as its first, latched array, not the empty one from before the first share.
+        held = len(self.list_srv().obstacles)
+        self.assertGreater(held, 0)
+        bus.subscribe_markers()
+        wait_for(lambda: bus.first_markers is not None, what="the latched fleet_obstacle_markers")
+        self.assertEqual(len(bus.labels(bus.first_markers)), held, bus.labels(bus.first_markers))
         wait_for(lambda: bus.list and bus.list.obstacles and len(bus.labels()) == len(bus.list.obstacles),
                  what="one label per listed obstacle on fleet_obstacle_markers")
         labels = bus.labels()
@@ -262,6 +278,22 @@ class TestHandlerNode(unittest.TestCase):
             self.assertTrue(any(text.startswith(o.source + " · ") and text.endswith(
                 " · %d cells" % len(o.marked_indexes)) for text in labels), (o.uuid, labels))
         self.assertEqual(bus.markers.markers[0].action, 3)   # DELETEALL first: gone obstacles vanish
+
+    def test_06bb_fleet_obstacles_list_counts_ages_on_the_handlers_clock(self):
+        # The tool on simulated time before any /clock (a fleet launch's /use_sim_time, the tool started
+        # before the simulator runs): its own clock reads 0, and ages from it came out negative.
+        rospy.set_param("/use_sim_time", True)
+        try:
+            proc = subprocess.run([sys.executable, os.path.join(os.path.dirname(HERE), "scripts", "fleet_obstacles"),
+                                   "list", "--robot", "robot_0"], capture_output=True, text=True, timeout=60)
+        finally:
+            rospy.delete_param("/use_sim_time")
+        self.assertEqual(proc.returncode, 0, proc.stderr)
+        rows = [line.split() for line in proc.stdout.splitlines()[1:]]
+        self.assertTrue(rows, proc.stdout)
+        for row in rows:
+            age = float(row[2])
+            self.assertTrue(0 <= age <= 120, "age %r in %s" % (age, proc.stdout))
 
     def test_06c_remove_obstacle_clears_it_fleet_wide_and_refuses_without_a_requester(self):
         bus = self.bus

@@ -289,13 +289,16 @@ class HandlerNode:
         array.obstacles = [self._list_entry(h, now, fresh) for h in self.handler.obstacles()]
         self._list_cache = fresh
         self._pub_list.publish(array)
-        self._publish_markers()
+        self._publish_markers(changed=True)
         finished = time.monotonic()
         self._list_due = finished + (finished - started) / self.params.list_cost_share
 
-    def _publish_markers(self):
-        if self._pub_markers.get_num_connections() == 0 and self._changes > 1:
-            return  # nobody looks (the latched first array still tells a late RViz there is nothing)
+    def _publish_markers(self, changed=False):
+        """On every change of the list, so that the latched array a late subscriber (RViz started later,
+        rostopic echo) gets first is the list as it is; at each tick only while someone looks (the
+        labels' ages move)."""
+        if not changed and self._pub_markers.get_num_connections() == 0:
+            return
         self._pub_markers.publish(obstacle_markers(self.handler.obstacles(), rospy.get_time(),
                                                    self._map_frame or "map", rospy.Time.now()))
 
