@@ -32,3 +32,26 @@ def test_a_negative_transform_tolerance_stops_the_node_naming_the_parameter(tmp_
     out = proc.stdout + proc.stderr
     assert re.search(r"fleet_sim cannot start: parameter ~transform_tolerance must be >= 0, got -0\.5", out), out
     assert re.search(r"REQUIRED process \[fleet_sim-\d+\] has died", out), out
+
+
+def test_a_world_whose_floorplan_bitmap_is_missing_stops_the_node_naming_it(tmp_path):
+    """rosrun fleet_sim fleet_sim _world:=... (no ~strict): before, it logged one ERROR and simulated a
+    world without walls."""
+    world = os.path.join(h.DATA, "broken", "missing_bitmap.world")
+    launch = tmp_path / "sim.launch"
+    launch.write_text("""<launch>
+  <param name="/use_sim_time" value="true"/>
+  <node pkg="fleet_sim" type="fleet_sim" name="fleet_sim" required="true" output="screen">
+    <param name="world" value="%s"/>
+  </node>
+</launch>
+""" % world)
+    port = free_port()
+    env = dict(os.environ, ROS_IP="127.0.0.1", ROS_HOSTNAME="127.0.0.1",
+               ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_HOME=str(tmp_path))
+    proc = subprocess.run(["roslaunch", "-p", str(port), str(launch)], capture_output=True, text=True,
+                          env=env, timeout=120)
+    out = proc.stdout + proc.stderr
+    assert "fleet_sim cannot start: %s:3: bitmap %s not found: without it the world has no walls" % (
+        world, os.path.join(h.DATA, "broken", "does_not_exist.png")) in out, out
+    assert re.search(r"REQUIRED process \[fleet_sim-\d+\] has died", out), out

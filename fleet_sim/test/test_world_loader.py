@@ -6,7 +6,7 @@ import pytest
 
 import sim_test_helpers as h
 from fleet_sim.errors import WorldError, WorldSyntaxError
-from fleet_sim.world import load_world
+from fleet_sim.world import load_world, require_robots
 from fleet_sim.world.parser import parse_world
 
 
@@ -135,9 +135,8 @@ def test_bad_values_drop_only_the_bad_models():
     assert [r.name for r in w.robots] == ["ok", "zero_samples"]
     assert len(w.robots[0].rangers) == 1
     assert len(w.robots[1].rangers) == 1          # the macro's ranger stays, the bad one goes
-    assert errors == w.problems and len(w.problems) == 6
-    expect = [(5, "does_not_exist.png not found", "'no_bitmap'"),
-              (6, "'pose' must be [3 or 4 numbers], got (1.0, 2.0)", "'bad_pose'"),
+    assert errors == w.problems and len(w.problems) == 5
+    expect = [(6, "'pose' must be [3 or 4 numbers], got (1.0, 2.0)", "'bad_pose'"),
               (7, "'pose' must be [3 or 4 numbers], got 'here'", "'text_pose'"),
               (8, "size must be positive, got [-1.0, 1.0]", "'negative'"),
               (10, "samples must be a whole number >= 1, got 0", "zero_samples"),
@@ -151,7 +150,30 @@ def test_strict_mode_raises_on_the_first_bad_model():
     path = os.path.join(h.DATA, "broken", "bad_values.world")
     with pytest.raises(WorldError) as info:
         load_world(path, strict=True, log=quiet)
-    assert info.value.line == 5 and "does_not_exist.png" in str(info.value)
+    assert info.value.line == 6 and "'pose' must be" in str(info.value)
+
+
+@pytest.mark.parametrize("strict", [False, True])
+def test_a_missing_floorplan_bitmap_is_refused_not_simulated_without_walls(strict):
+    path = os.path.join(h.DATA, "broken", "missing_bitmap.world")
+    with pytest.raises(WorldError) as info:
+        load_world(path, strict=strict, log=quiet)
+    assert info.value.path == path and info.value.line == 3
+    assert "does_not_exist.png not found: without it the world has no walls" in str(info.value)
+
+
+@pytest.mark.parametrize("count, refused", [(0, False), (2, False), (3, True)])
+def test_a_world_with_fewer_robots_than_driven_is_refused(count, refused):
+    path = os.path.join(h.DATA, "room.world")
+    world = load_world(path, log=quiet)
+    assert len(world.robots) == 2
+    if not refused:
+        require_robots(world, count)
+        return
+    with pytest.raises(WorldError) as info:
+        require_robots(world, count)
+    assert str(info.value).startswith(path + ": holds 2 robot(s)")
+    assert "but 3 are to be driven (robots:=3)" in str(info.value)
 
 
 def test_bad_world_level_value_is_an_error(tmp_path):

@@ -146,19 +146,22 @@ def test_stage_display_none_runs_stageros_without_a_window(stand_ins):
     assert "with_xvfb" not in out and " -g -u " in " " + out, out
 
 
-@pytest.mark.parametrize("arg, name", [
-    ("robots:=0", "robots_must_be_an_integer_from_1_to_10"),
-    ("robots:=11", "robots_must_be_an_integer_from_1_to_10"),
-    ("obstacle_duration:=0", "obstacle_duration_must_be_at_least_1_second"),
-    ("layout:=nowhere", "layout_must_be_facility_deadend_or_corridors"),
-    ("stage_display:=window", "stage_display_must_be_xvfb_screen_or_none"),
-    ("speedup:=0", "speedup_must_be_above_0"),
-    ("speedup:=-1", "speedup_must_be_above_0"),
+@pytest.mark.parametrize("arg, message", [
+    ("robots:=0", "robots:=0: robots must be a whole number from 1 to 10"),
+    ("robots:=11", "robots:=11: robots must be a whole number from 1 to 10"),
+    ("obstacle_duration:=0", "obstacle_duration:=0: obstacle_duration must be a number of seconds, at least 1"),
+    ("obstacle_duration:=long", "obstacle_duration:=long: obstacle_duration must be a number of seconds, at least 1"),
+    ("layout:=nowhere", "layout:=nowhere: layout must be corridors, facility or deadend"),
+    ("stage_display:=window", "stage_display:=window: stage_display must be xvfb, screen or none"),
+    ("speedup:=0", "speedup:=0: speedup must be a number above 0"),
+    ("speedup:=-1", "speedup:=-1: speedup must be a number above 0"),
+    ("speedup:=fast", "speedup:=fast: speedup must be a number above 0"),
 ])
-def test_bad_argument_is_refused_with_its_name(stand_ins, arg, name):
+def test_bad_argument_is_refused_naming_it_its_value_and_what_it_must_be(stand_ins, arg, message):
     rc, out = roslaunch(stand_ins, "--nodes", "fleet_launch", "move_base_fleet.launch", arg)
     assert rc != 0, out
-    assert name in out, out
+    assert "Invalid <arg> tag: " + message in out, out
+    assert "is not defined" not in out and "could not convert" not in out, out
 
 
 def test_speedup_reaches_stage_through_stage_world(stand_ins):

@@ -3,7 +3,10 @@
 Parameters (private):
   ~world (str, required)             Stage .world file
   ~stage43_range_compat (bool=false) Stage 4.3's 5 m default instead of the world's range_max
-  ~strict (bool=false)               refuse a world with any bad model instead of dropping it
+  ~strict (bool=false)               refuse a world with any bad model instead of dropping it (a
+                                     missing floorplan bitmap is always refused)
+  ~robots (int=0)                    robots the launch drives (robot_0 ..): a world holding fewer is
+                                     refused at start-up; 0: no check
   ~speedup (float)                   0 = as fast as possible, 1 = real time (default: the
                                      world's ``speedup``, else 1)
   ~seed (int=0)                      localisation-noise seed
@@ -46,7 +49,7 @@ from fleet_sim.sim import LocalisationError, Simulation
 from fleet_sim.snapshot import save_png
 from fleet_sim.srv import (AddBlock, AddBlockResponse, MoveBlock, MoveBlockResponse, RemoveBlock,
                            RemoveBlockResponse, Snapshot, SnapshotResponse)
-from fleet_sim.world import load_world
+from fleet_sim.world import load_world, require_robots
 
 
 class _RosoutHandler(logging.Handler):
@@ -101,6 +104,7 @@ class SimNode:
                            strict=bool(rospy.get_param("~strict", False)),
                            log=self._log)
         self.errors = len(world.problems)
+        require_robots(world, int(_number_param("~robots", 0, minimum=0)))
         if not world.robots:
             rospy.logwarn("%s: the world has no position model (robot)", world_path)
         map_from_world = self._map_from_world(world)

@@ -28,10 +28,12 @@ in Stage. ``stage43_range_compat=True`` reads exactly as Stage 4.3: the Stage-3 
 ignored (with the warning) and the default [0, 5] applies, as in the recorded stageros bags.
 
 Errors: a file that cannot be parsed raises ``WorldSyntaxError`` (file, line,
-reason). A model with a bad value (missing bitmap, bad pose, negative size, zero
-samples, ...) is dropped with one error line naming file, line and value, recorded
-in ``World.problems``; the rest of the world loads. ``strict=True`` raises
-``WorldError`` for those instead.
+reason). A model with a bad value (bad pose, negative size, zero samples, ...) is
+dropped with one error line naming file, line and value, recorded in
+``World.problems``; the rest of the world loads. ``strict=True`` raises
+``WorldError`` for those instead. A floorplan bitmap that is missing or unreadable
+always raises ``WorldError``: without it the world has no walls, and a simulation
+of it would only look like it runs.
 """
 import logging
 import math
@@ -66,13 +68,14 @@ _WORLD_USED = {"resolution", "interval_sim", "speedup"}
 
 
 class _Drop(Exception):
-    """A model with a bad value: dropped (or raised in strict mode)."""
+    """A model with a bad value: dropped (or raised in strict mode); a fatal one is always raised."""
 
-    def __init__(self, prop_or_entity, reason):
+    def __init__(self, prop_or_entity, reason, fatal=False):
         super().__init__(reason)
         self.path = prop_or_entity.path
         self.line = prop_or_entity.line
         self.reason = reason
+        self.fatal = fatal
 
 
 def load_world(path, stage43_range_compat=False, strict=False, log=None):
@@ -109,6 +112,16 @@ def load_world(path, stage43_range_compat=False, strict=False, log=None):
             continue
         ctx.load_entity(ent, (0.0, 0.0, 0.0), strict)
     return world
+
+
+def require_robots(world, count):
+    """Raises WorldError unless the world holds at least `count` robots (a launch that drives robot_0 ..
+    robot_{count-1}: without this, the missing robots' navigation waits for a pose for ever)."""
+    if len(world.robots) < count:
+        raise WorldError(world.path, 0, "holds %d robot(s) (%s), but %d are to be driven (robots:=%d): give a world "
+                         "with at least %d robots (fleet_launch's worlds/<layout>_%d.world) or fewer robots"
+                         % (len(world.robots), ", ".join(r.name for r in world.robots) or "none", count, count,
+                            count, count))
 
 
 def _default_log(level, msg):
@@ -151,7 +164,7 @@ class _Ctx:
             else:
                 self.log("debug", "%s: model type '%s' not simulated, ignored" % (ent.where(), ent.type))
         except _Drop as drop:
-            if strict:
+            if strict or drop.fatal:
                 raise WorldError(drop.path, drop.line, drop.reason) from None
             msg = "%s:%d: %s; %s %s dropped" % (drop.path, drop.line, drop.reason, ent.type, _label(ent))
             self.world.problems.append(msg)
@@ -169,7 +182,7 @@ class _Ctx:
         if "bitmap" in ent.props:
             prop = ent.props["bitmap"]
             if not isinstance(prop.value, str) or not prop.value:
-                raise _Drop(prop, "bitmap must be a quoted file name, got %r" % (prop.value,))
+                raise _Drop(prop, "bitmap must be a quoted file name, got %r" % (prop.value,), fatal=True)
             bitmap = os.path.normpath(os.path.join(os.path.dirname(prop.path), prop.value))
             if not os.path.isfile(bitmap):   # Stage resolves against the world file's folder
                 beside_world = os.path.normpath(os.path.join(os.path.dirname(self.world.path), prop.value))
@@ -410,7 +423,8 @@ def _read_bitmap(path, prop):
     """Occupancy of an image as Stage sees it: a pixel darker than mid-grey is solid."""
     from PIL import Image  # local import: PIL is only needed for bitmaps
     if not os.path.isfile(path):
-        raise _Drop(prop, "bitmap %s not found" % path)
+        raise _Drop(prop, "bitmap %s not found: without it the world has no walls; give the path relative to the "
+                    "file that names it or to the world file's folder, as Stage does" % path, fatal=True)
     try:
         with Image.open(path) as img:
             img.load()
@@ -422,9 +436,10 @@ def _read_bitmap(path, prop):
                 lum = np.asarray(img.convert("L"), dtype=np.uint8)
                 solid = lum < 128
     except (OSError, ValueError) as err:
-        raise _Drop(prop, "bitmap %s cannot be read (%s)" % (path, err)) from None
+        raise _Drop(prop, "bitmap %s cannot be read (%s): without it the world has no walls" % (path, err),
+                    fatal=True) from None
     if solid.size == 0:
-        raise _Drop(prop, "bitmap %s is empty" % path)
+        raise _Drop(prop, "bitmap %s is empty: without it the world has no walls" % path, fatal=True)
     return solid
 
 
