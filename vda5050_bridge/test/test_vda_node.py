@@ -172,3 +172,90 @@ def _connects(port):
         return True
     except OSError:
         return False
+
+
+def test_node_as_the_readme_shows_it_warns_about_namespace_handler_and_broker(tmp_path, wait_for):
+    """`rosrun vda5050_bridge vda5050_bridge` with no namespace, no handler and no broker: before, one info
+    line and silence. Now three warnings say what is wrong and what to do (the broker's and the list's
+    repeat while it lasts)."""
+    reason = _ros_missing()
+    if reason:
+        pytest.skip(reason)
+    ros_port, dead_port = _free_port(), _free_port()      # nothing listens on dead_port
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % ros_port, ROS_IP="127.0.0.1",
+               ROS_HOSTNAME="127.0.0.1", PYTHONPATH=os.path.join(PKG, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               ROS_LOG_DIR=str(tmp_path / "log"))
+    master_proc = subprocess.Popen(["rosmaster", "--core", "-p", str(ros_port)], env=env,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = tmp_path / "node.err"
+    node = None
+    try:
+        wait_for(lambda: _connects(ros_port), what="rosmaster")
+        with open(str(log), "w") as err:
+            node = subprocess.Popen([sys.executable, os.path.join(PKG, "scripts", "vda5050_bridge"),
+                                     "_broker_port:=%d" % dead_port], env=env, stdout=subprocess.DEVNULL, stderr=err)
+
+        def said(text):
+            return text in log.read_text()
+        wait_for(lambda: said("runs in the root namespace as robot 'robot'"), timeout=30, what="namespace warning")
+        wait_for(lambda: said("VDA 5050 broker 127.0.0.1:%d not reachable" % dead_port), timeout=30,
+                 what="broker warning")
+        wait_for(lambda: said("nothing publishes /shared_obstacle_list"), timeout=30, what="handler list warning")
+        assert "ROS_NAMESPACE=robot_0 rosrun vda5050_bridge vda5050_bridge" in log.read_text()
+        assert node.poll() is None, "the node keeps running"
+    finally:
+        if node is not None and node.poll() is None:
+            node.send_signal(signal.SIGINT)
+            try:
+                node.wait(10)
+            except subprocess.TimeoutExpired:
+                node.kill()
+                node.wait()
+        master_proc.terminate()
+        master_proc.wait(10)
+
+
+def test_in_a_namespace_with_a_handler_list_and_a_broker_it_stays_quiet(broker, tmp_path, wait_for):
+    """The other side of the warnings above: set up as documented, none of them comes (judged after eight
+    state heartbeats at 1 s, past the first warnings' 5 s)."""
+    reason = _ros_missing()
+    if reason:
+        pytest.skip(reason)
+    host, port = broker
+    ros_port = _free_port()
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % ros_port, ROS_IP="127.0.0.1",
+               ROS_HOSTNAME="127.0.0.1", PYTHONPATH=os.path.join(PKG, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               ROS_LOG_DIR=str(tmp_path / "log"))
+    master_proc = subprocess.Popen(["rosmaster", "--core", "-p", str(ros_port)], env=env,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = tmp_path / "node.err"
+    procs = []
+    mc = None
+    try:
+        wait_for(lambda: _connects(ros_port), what="rosmaster")
+        # the handler's latched list, as a sharing_handler in robot_0 publishes it
+        procs.append(subprocess.Popen(["rostopic", "pub", "-l", "/robot_0/shared_obstacle_list",
+                                       "sharing_msgs/SharedObstacleArray", "{}"], env=env,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        mc = Master(host, port, core.topic_prefix("uagv", "2.1.0", "fleet", "robot_0"))
+        assert mc.ready.wait(10)
+        with open(str(log), "w") as err:
+            procs.append(subprocess.Popen([sys.executable, os.path.join(PKG, "scripts", "vda5050_bridge"),
+                                           "__ns:=robot_0", "__name:=vda5050_bridge", "_broker_port:=%d" % port,
+                                           "_state_interval:=1.0"], env=env, stdout=subprocess.DEVNULL, stderr=err))
+        wait_for(lambda: len(mc.states()) >= 8, timeout=60, what="eight states from the node")
+        text = log.read_text()
+        assert "root namespace" not in text and "not reachable" not in text and "nothing publishes" not in text, text
+    finally:
+        if mc is not None:
+            mc.stop()
+        for proc in procs:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+        master_proc.terminate()
+        master_proc.wait(10)

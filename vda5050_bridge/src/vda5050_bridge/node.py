@@ -7,6 +7,7 @@ map (``~map_topic``, for the grid the master-control areas are drawn on), option
 ``from_fleet`` (SharedObstacle, source ``master_control``: an external obstacle to the handler,
 as the Coaty bridge delivers a peer's) and ``/diagnostics`` (the counters)."""
 import threading
+import time
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -18,9 +19,21 @@ from vda5050_bridge import core
 from vda5050_bridge.client import VdaMqttClient
 
 
+#: s after start-up before a missing broker or handler list is first warned about, and between repeats
+FIRST_WARN_AFTER = 5.0
+WARN_INTERVAL = 30.0
+
+
 class Node:
     def __init__(self):
         ns = rospy.get_namespace().strip("/")
+        if not ns and not rospy.has_param("~robot_name"):
+            # The handler and the layer live in the robot's namespace: from the root, this node reads a list
+            # nobody publishes and sends master control's areas to a from_fleet nobody reads.
+            rospy.logwarn("vda5050_bridge runs in the root namespace as robot 'robot': it reads /shared_obstacle_list "
+                          "and publishes /from_fleet, which a robot's sharing_handler has in its own namespace. Start it "
+                          "beside the handler: ROS_NAMESPACE=robot_0 rosrun vda5050_bridge vda5050_bridge (or "
+                          "__ns:=robot_0 in a launch group), or set ~robot_name if this robot has no namespace")
         self.robot = rospy.get_param("~robot_name", ns.replace("/", "_") or "robot")
         version = rospy.get_param("~protocol_version", "2.1.0")
         self.bridge = core.BridgeCore(
@@ -41,7 +54,9 @@ class Node:
             self.bridge, rospy.get_param("~broker_host", "127.0.0.1"), int(rospy.get_param("~broker_port", 1883)),
             interface_name=rospy.get_param("~interface_name", "uagv"), on_areas=self.on_areas,
             log=lambda level, line: rospy.logwarn(line))
-        rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self.on_list, queue_size=1)
+        self.started = time.monotonic()
+        self.warned = {}           # what was warned about ("broker", "list") -> time.monotonic() of the last warning
+        self.list_sub = rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self.on_list, queue_size=1)
         rospy.Subscriber(rospy.get_param("~map_topic", "/map"), OccupancyGrid, self.on_map, queue_size=1)
         rospy.Subscriber("vda5050_order", String, self.on_order, queue_size=10)
         self.client.start()
@@ -122,7 +137,30 @@ class Node:
             msg.resolution, msg.origin_x, msg.origin_y, msg.size_x, msg.size_y = res, ox, oy, sx, sy
             (publish or self.pub.publish)(msg)
 
+    def _due(self, what, now):
+        last = self.warned.get(what)
+        due = now - self.started >= FIRST_WARN_AFTER if last is None else now - last >= WARN_INTERVAL
+        if due:
+            self.warned[what] = now
+        return due
+
+    def check_links(self):
+        """Warns (first after FIRST_WARN_AFTER s, then every WARN_INTERVAL s) while the broker cannot be reached
+        or nothing publishes the handler's list: either way master control and this robot hear nothing of
+        each other, and the node would otherwise stay silent."""
+        now = time.monotonic()
+        if not self.client.connected.is_set() and self._due("broker", now):
+            rospy.logwarn("%s: vda5050_bridge: VDA 5050 broker %s:%d not reachable for %.0f s: master control gets no "
+                          "state from this robot and none of its blocked areas; retrying. Set ~broker_host and "
+                          "~broker_port to master control's broker", self.robot, self.client.host, self.client.port,
+                          now - self.started)
+        if self.list_sub.get_num_connections() == 0 and self._due("list", now):
+            rospy.logwarn("%s: vda5050_bridge: nothing publishes %s for %.0f s: no fleet obstacle reaches master "
+                          "control. Is this robot's sharing_handler running in %s?", self.robot,
+                          self.list_sub.resolved_name, now - self.started, rospy.get_namespace())
+
     def on_diagnostics(self, _event):
+        self.check_links()
         with self.client.lock:
             counters = dict(self.bridge.counters)
         status = DiagnosticStatus(name="vda5050_bridge: %s" % self.robot, hardware_id=self.client.prefix,
