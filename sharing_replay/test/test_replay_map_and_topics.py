@@ -147,3 +147,23 @@ def test_a_robot_without_trigger_or_plan_is_information_not_a_warning(world, tmp
     assert code == 32 and summary["missing_topics"] == ["/robot_1/stuck_feedback"]
     code, _text, err = replay_command(path, tmp_path / "named_cli", "--trigger", "stuck_feedback")
     assert code == 32 and "missing topic /robot_1/stuck_feedback" in err, err
+
+
+def test_a_single_robot_bag_with_its_footprint_replays(world, tmp_path):
+    """A bag of one robot that recorded its footprint (record_bag.launch does): nobody to exclude, the
+    footprint is not read, and the replay runs as without it."""
+    import rosbag
+    import rospy
+    from geometry_msgs.msg import Point32, PolygonStamped
+    path = str(tmp_path / "one_with_footprint.bag")
+    robot = synth.SynthRobot("robot_0", [(2.0, 6.0), (18.6, 6.0)], speed=1.0, stuck_at=[18.0])
+    synth.write_bag(path, world, [robot], 20.0)
+    with rosbag.Bag(path, "a") as bag:
+        msg = PolygonStamped()
+        msg.header.frame_id = "map"
+        msg.header.stamp = rospy.Time.from_sec(101.0)
+        msg.polygon.points = [Point32(x, y, 0.0) for x, y in ((0, 0), (1, 0), (1, 1))]
+        bag.write("/robot_0/move_base/global_costmap/footprint", msg, msg.header.stamp)
+    code, summary, text, err = replay(path, tmp_path / "out")
+    assert code == 0, text + err
+    assert summary["obstacles_shared"] >= 1 and summary["robot_exclusion"]["robots"] == {}

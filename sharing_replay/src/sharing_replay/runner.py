@@ -424,10 +424,11 @@ class Replay:
         """Every robot of the bag (not only those replayed), placed for the others' layers."""
         if not self.settings.robot_exclusion:
             return
-        frames, self.footprint_topics = find_other_robots(topics, self.settings)
-        if len(frames) > 1:
+        frames, footprint_topics = find_other_robots(topics, self.settings)
+        if len(frames) > 1:   # a robot alone has nobody to exclude (its own footprint is not shared anyway)
             s = self.settings
             self.others = OtherRobots(self.chain, s.global_frame, frames, s.footprint, s.robot_timeout)
+            self.footprint_topics = footprint_topics
 
     def _prepare_triggers(self, source, topics):
         found = find_triggers(self.robots.values(), topics, self.settings, source.start_time)
