@@ -31,8 +31,6 @@ unset _fleet_upstream
 export ROS_IP="${ROS_IP:-127.0.0.1}"
 export ROS_HOSTNAME="${ROS_HOSTNAME:-$ROS_IP}"
 export PYTHONDONTWRITEBYTECODE=1
-# The shared data (real Stage worlds, move_base configs, bags) lives beside the repository.
-if [ -z "${FLEET_SHARED_DATA:-}" ] && [ -d "$REPO_ROOT/../shared/data" ]; then
-  FLEET_SHARED_DATA="$(cd "$REPO_ROOT/../shared/data" && pwd)"
-  export FLEET_SHARED_DATA
-fi
+# The reference data (real Stage worlds, move_base configs, bags) is in the repository's data/
+# (data/README.md); a FLEET_SHARED_DATA set before sourcing this file points elsewhere instead.
+export FLEET_SHARED_DATA="${FLEET_SHARED_DATA:-$REPO_ROOT/data}"

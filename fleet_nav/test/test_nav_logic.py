@@ -16,9 +16,8 @@ from fleet_nav.errors import GoalRejected, ParameterError  # noqa: E402
 from fleet_nav.navigator import ABORT_TEXT, Event, Navigator, RecoveryTrigger, State  # noqa: E402
 from fleet_nav.params import NavParams, inscribed_radius  # noqa: E402
 
-# The shared data: $FLEET_SHARED_DATA, else ../shared/data beside the repository.
-SHARED_DATA = os.environ.get("FLEET_SHARED_DATA") or os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(HERE))), "shared", "data")
+# The reference data: $FLEET_SHARED_DATA, else the repository's data/ (data/README.md).
+SHARED_DATA = os.environ.get("FLEET_SHARED_DATA") or os.path.join(os.path.dirname(os.path.dirname(HERE)), "data")
 CONFIG = os.path.join(SHARED_DATA, "move_base_config")
 
 

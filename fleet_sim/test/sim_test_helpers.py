@@ -12,9 +12,9 @@ except ImportError:          # not built/sourced: the pure modules from the sour
     sys.path.insert(0, os.path.join(os.path.dirname(HERE), "src"))
 
 DATA = os.path.join(HERE, "data")
-# The project's reference data: $FLEET_SHARED_DATA, else ../shared/data next to the repo.
+# The project's reference data: $FLEET_SHARED_DATA, else the repository's data/ (data/README.md).
 SHARED = os.environ.get("FLEET_SHARED_DATA") or os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))), "shared", "data")
+    os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))), "data")
 WILLOW = os.path.join(SHARED, "stage_worlds", "willow", "willow-pr2-multi.world")
 SIMPLE = os.path.join(SHARED, "stage_worlds", "stage_examples", "simple.world")
 WILLOW_PGM = os.path.join(SHARED, "stage_worlds", "maps", "willow-full.pgm")

@@ -1,8 +1,9 @@
-"""Replay of the real stage_ros + move_base bag in ../shared/data/bags (skipped when absent).
+"""Replay of the real stage_ros + move_base recording, in the two excerpts in the repository's data/bags
+(data/README.md: what the run holds and how the excerpts were cut).
 
-What the bag holds (its README): one PR2 in Willow, a 4 m x 0.4 m block closing the corridor
-at map x ~ 23 (not in the map), no local-planner failure at the block (navfn replanned), and
-one move_base/recovery_status at t = 185.7 s near map (34.1, 19.2).
+One PR2 in Willow, a 4 m x 0.4 m block closing the corridor at map x ~ 23 (not in the map), no
+local-planner failure at the block (navfn replanned), and one move_base/recovery_status at t = 185.7 s
+near map (34.1, 19.2).
 """
 import glob
 import io
@@ -13,18 +14,21 @@ import pytest
 
 from sharing_replay import cli
 
-# The shared data: $FLEET_SHARED_DATA, else ../shared/data beside the repository.
+# The reference data: $FLEET_SHARED_DATA, else the repository's data/.
 DATA = os.environ.get("FLEET_SHARED_DATA") or os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))), "shared", "data")
-BAG = os.path.join(DATA, "bags", "willow_blocked_corridor_stage.bag")
+    os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))), "data")
+BLOCK_BAG = os.path.join(DATA, "bags", "willow_blocked_corridor_first_30s.bag")
+RECOVERY_BAG = os.path.join(DATA, "bags", "willow_recovery_178s_to_192s.bag")
 PARAMS = os.path.join(DATA, "move_base_config", "costmap_common_params.yaml")
-pytestmark = pytest.mark.skipif(not (os.path.isfile(BAG) and os.path.isfile(PARAMS)),
-                                reason="the recorded bag %s is not here" % BAG)
+pytestmark = pytest.mark.skipif(
+    not all(os.path.isfile(p) for p in (BLOCK_BAG, RECOVERY_BAG, PARAMS)),
+    reason="the recorded Willow bags are not in %s: they are in the repository's data/bags (data/README.md); "
+           "point FLEET_SHARED_DATA at that folder" % DATA)
 
 
-def replay(out, *args):
+def replay(out, *args, bag=BLOCK_BAG):
     stdout, stderr = io.StringIO(), io.StringIO()
-    code, summary = cli.run([BAG, "--out-dir", str(out), "--progress", "never", "--params", PARAMS] + list(args),
+    code, summary = cli.run([bag, "--out-dir", str(out), "--progress", "never", "--params", PARAMS] + list(args),
                             stdout, stderr)
     return code, summary, stdout.getvalue() + stderr.getvalue()
 
@@ -34,10 +38,10 @@ def test_recorded_trigger_shares_nothing_at_the_recovery(tmp_path):
     # and the one recovery (185.7 s, robot at (34.14, 19.21)) had only walls around it, where the
     # map is occupied or unknown: with unknown cells unshareable it proposes nothing (before, it
     # shared wall cells that Stage has and the map leaves grey).
-    code, summary, text = replay(tmp_path, "--plan-topics", "none")
+    code, summary, text = replay(tmp_path, "--plan-topics", "none", bag=RECOVERY_BAG)
     assert code == 0, text
     assert summary["robots"] == ["robot"]
-    assert summary["scans_processed"] == 2452 and summary["scans_dropped"] == 0
+    assert summary["scans_processed"] == 141 and summary["scans_dropped"] == 0
     assert summary["map"].startswith("/map")         # taken from the bag
     assert summary["triggers"] == 1
     with open(os.path.join(str(tmp_path), "events.jsonl"), encoding="utf-8") as handle:
@@ -64,7 +68,7 @@ def test_trigger_at_the_block_shares_the_block_and_not_the_walls(tmp_path):
 
 @pytest.mark.parametrize("bag", sorted(glob.glob(os.path.join(DATA, "bags", "*.bag"))) or ["(none)"])
 def test_every_recorded_bag_replays_without_damage(bag, tmp_path):
-    """Any stage_ros-shaped bag dropped into the shared bags folder replays with the defaults."""
+    """Any stage_ros-shaped bag dropped into the data's bags folder replays with the defaults."""
     if not os.path.isfile(bag):
         pytest.skip("no bags in %s" % os.path.join(DATA, "bags"))
     import rosbag

@@ -1,6 +1,7 @@
 """Fixtures of the vda5050_bridge tests: the pure modules from src/ (no built workspace needed),
-the VDA 5050 2.0.0 schemas (not shipped: no licence at that tag) from $VDA5050_SCHEMA_DIR or a
-local clone of github.com/VDA5050/VDA5050, and a private mosquitto on 127.0.0.1."""
+the VDA 5050 2.0.0 schemas (shipped in schemas/2.0.0; $VDA5050_SCHEMA_DIR or a local clone of
+github.com/VDA5050/VDA5050 in $VDA5050_REPO instead, to test against other copies), and a private
+mosquitto on 127.0.0.1."""
 import os
 import shutil
 import subprocess
@@ -13,8 +14,8 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 if SRC not in sys.path:
     sys.path.insert(0, SRC)
 
-#: a git clone of github.com/VDA5050/VDA5050 (tag 2.0.0 is read from it), if any: 2.0.0 has no licence
-#: file, so its schemas are not shipped; without a clone the 2.0.0 cases skip and say so
+#: a git clone of github.com/VDA5050/VDA5050 (tag 2.0.0 is read from it) to test against instead of the
+#: shipped 2.0.0 schemas, if any
 VDA_CLONE = os.environ.get("VDA5050_REPO", "")
 
 
@@ -24,12 +25,19 @@ def pytest_configure(config):
 
 @pytest.fixture(scope="session")
 def schema_2_0_0(tmp_path_factory):
-    """Makes the 2.0.0 schemas available through $VDA5050_SCHEMA_DIR; skips when there are none."""
+    """The folder the 2.0.0 schemas are read from: $VDA5050_SCHEMA_DIR, else those of a clone in
+    $VDA5050_REPO (made available through $VDA5050_SCHEMA_DIR), else the shipped ones."""
+    from vda5050_bridge import schemas
     env = os.environ.get("VDA5050_SCHEMA_DIR")
     if env and os.path.isfile(os.path.join(env, "2.0.0", "state.schema")):
         return env
-    if not VDA_CLONE or not os.path.isdir(VDA_CLONE) or not shutil.which("git"):
-        pytest.skip("VDA 5050 2.0.0 schemas not available (set VDA5050_SCHEMA_DIR or VDA5050_REPO)")
+    if not VDA_CLONE:
+        assert os.path.isfile(os.path.join(schemas.PACKAGE_SCHEMAS, "2.0.0", "state.schema")), \
+            "the shipped VDA 5050 2.0.0 schemas are missing from %s" % schemas.PACKAGE_SCHEMAS
+        return schemas.PACKAGE_SCHEMAS
+    if not os.path.isdir(VDA_CLONE) or not shutil.which("git"):
+        pytest.skip("VDA5050_REPO=%s is not a git clone of github.com/VDA5050/VDA5050 (or git is missing); "
+                    "unset it to test against the shipped 2.0.0 schemas" % VDA_CLONE)
     root = tmp_path_factory.mktemp("vda_schemas")
     os.makedirs(os.path.join(str(root), "2.0.0"))
     for name in ("state", "order", "instantActions", "connection"):

@@ -1,11 +1,11 @@
 """The official VDA 5050 JSON schemas, loaded and compiled once per version.
 
-2.1.0 and 3.0.0 ship in ``<package>/schemas/<version>/`` (MIT licence of the VDA, see the
-LICENSE.txt beside them); 3.0.0 from upstream commit ad16956 ("fixed syntax in schemas": the
-3.0.0 tag's order/state/visualization/factsheet/zoneSet files are not valid JSON or have keys with
-trailing blanks; that commit changes only that). The 2.0.0 tag of github.com/VDA5050/VDA5050 carries no licence file,
-so its schemas are not shipped: they are read from ``$VDA5050_SCHEMA_DIR/2.0.0/`` when that is
-set (any version found there wins over the shipped copy).
+2.0.0, 2.1.0 and 3.0.0 ship in ``<package>/schemas/<version>/`` (MIT licence of the VDA, see the
+LICENSE.txt beside them; the 2.0.0 tag itself carries no licence file, the repository was published
+under the MIT licence later, README.md); 3.0.0 from upstream commit ad16956 ("fixed syntax in
+schemas": the 3.0.0 tag's order/state/visualization/factsheet/zoneSet files are not valid JSON or have
+keys with trailing blanks; that commit changes only that). A version found in
+``$VDA5050_SCHEMA_DIR/<version>/`` wins over the shipped copy.
 """
 import json
 import os
