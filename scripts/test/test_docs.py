@@ -6,7 +6,10 @@
   file of that package that declares each arg; `rosrun PKG EXE` a program of that package;
   `rostest PKG FILE` a test file; `make TARGET` a Makefile target; `make bench NAME=x` a benchmark;
 - YAML and XML snippets parse, and what they name (plugin types, node packages and types) exists;
-- no table row of measured figures or parameters appears in two documents (one place per table).
+- no table row of measured figures or parameters appears in two documents (one place per table);
+- no README cites a document or an issue that is not in the repository (a design note, an issue
+  number, a path beside the repository): a reader of a clone has only the clone;
+- every `fleet_obstacles` command in a README is one the tool accepts.
 Running the commands themselves is the demo's and the tests' job; this checks they still point at
 what is there.
 """
@@ -29,7 +32,10 @@ PACKAGES = {}
 for _xml in glob.glob(os.path.join(ROOT, "*", "package.xml")):
     PACKAGES[ET.parse(_xml).getroot().findtext("name")] = os.path.dirname(_xml)
 
-DOCS = sorted(glob.glob(os.path.join(ROOT, "*.md")) + glob.glob(os.path.join(ROOT, "*", "README.md")))
+DOCS = sorted(glob.glob(os.path.join(ROOT, "*.md")) + [
+    p for p in glob.glob(os.path.join(ROOT, "**", "README.md"), recursive=True)
+    if os.path.dirname(p) != ROOT and not os.path.relpath(p, ROOT).startswith(("catkin_ws" + os.sep, "out" + os.sep))])
+READMES = [d for d in DOCS if os.path.basename(d) == "README.md"]
 TOP = os.path.join(ROOT, "README.md")
 # Packages the READMEs may name that are not ours: upstream's, present only where they are installed.
 UPSTREAM = {"move_base", "stage_ros", "map_server", "fake_localization", "rqt_reconfigure", "dynamic_reconfigure",
@@ -144,6 +150,8 @@ def check_command(line):
     if not words:
         return None
     tool, args = words[0], words[1:]
+    if tool == "roslaunch":
+        args = [a for a in args if a not in ("--ros-args", "--nodes", "--dump-params", "--files")]
     if tool in ("roslaunch", "rostest", "rosrun") and args and args[0] in UPSTREAM:
         return None
     if tool == "rostest" and args and args[0].endswith(".test"):
@@ -240,6 +248,106 @@ def test_no_measured_or_parameter_row_is_in_two_documents():
         "\n".join("%s: %s" % (", ".join(d), r[:120]) for r, d in sorted(twice.items()))
 
 
+# A reference to something a clone does not hold. Issue numbers: the tracker is not in the clone (CHANGELOG.md
+# keeps them as history). A section sign: a section of a document, which then must be named and present.
+ISSUE = re.compile(r"\b(?:issues?|pull requests?|PRs?)\s+#?\d+", re.I)
+SECTION = re.compile(r"§")
+DOCUMENT = re.compile(r"(?<![\w/.-])((?:\.\./|\./)*[\w.-]+(?:/[\w.-]+)*\.(?:md|pdf|docx?))\b")
+OUTSIDE = re.compile(r"(?<![\w/.-])((?:\.\./)+[\w.-]+(?:/[\w.-]+)*)")
+URL = re.compile(r"[a-z]+://\S+")
+# What the project's own commands write (make demo's report): named, not cited.
+GENERATED = ("out/",)
+# What may name a folder beside the repository: where `make setup` looks for the upstream source archives.
+OUTSIDE_ALLOWED = {("upstream/README.md", "../shared/upstream")}
+
+
+def tracked_names():
+    names = set()
+    for path in glob.glob(os.path.join(ROOT, "**", "*"), recursive=True):
+        if "catkin_ws" not in os.path.relpath(path, ROOT).split(os.sep)[:1]:
+            names.add(os.path.basename(path))
+    return names
+
+
+def outside_citations(text, doc_path, names=None):
+    """What a README cites that the repository does not hold, as lines."""
+    names = tracked_names() if names is None else names
+    rel_doc = os.path.relpath(doc_path, ROOT)
+    found = []
+    for number, line in enumerate(text.splitlines(), 1):
+        line = URL.sub("", line)
+        for m in ISSUE.finditer(line):
+            found.append("%s:%d: an issue (%s): say the reason instead" % (rel_doc, number, m.group(0)))
+        if SECTION.search(line):
+            found.append("%s:%d: a section sign (%s): name the document and section, or say it" % (
+                rel_doc, number, line.strip()[:60]))
+        for m in DOCUMENT.finditer(line):
+            target = m.group(1)
+            if target.startswith(GENERATED):
+                continue
+            candidates = [os.path.normpath(os.path.join(base, target)) for base in (os.path.dirname(doc_path), ROOT)]
+            if any(c.startswith(ROOT + os.sep) and os.path.exists(c) for c in candidates):
+                continue
+            if "/" not in target and target in names:
+                continue
+            found.append("%s:%d: a document not in the repository: %s" % (rel_doc, number, target))
+        for m in OUTSIDE.finditer(line):
+            target = os.path.normpath(os.path.join(os.path.dirname(doc_path), m.group(1)))
+            if not (target + os.sep).startswith(ROOT + os.sep) and (rel_doc, m.group(1)) not in OUTSIDE_ALLOWED:
+                found.append("%s:%d: a path beside the repository: %s" % (rel_doc, number, m.group(1)))
+    return found
+
+
+@pytest.mark.parametrize("doc", READMES, ids=rel)
+def test_no_readme_cites_a_document_or_issue_outside_the_repository(doc):
+    found = outside_citations(read(doc), doc)
+    assert not found, "\n".join(found)
+
+
+def fleet_obstacles_parser():
+    import importlib.machinery
+    import importlib.util
+    path = os.path.join(ROOT, "sharing_handler_py", "scripts", "fleet_obstacles")
+    loader = importlib.machinery.SourceFileLoader("fleet_obstacles_tool", path)
+    spec = importlib.util.spec_from_loader("fleet_obstacles_tool", loader)
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module.parse
+
+
+# Placeholders a README writes for what the user fills in.
+PLACEHOLDERS = {"UUID": "00000000-0000-4000-8000-000000000001", "NAME": "anna", "robot_N": "robot_0"}
+
+
+def fleet_obstacles_commands(text):
+    """The argument lists of the `fleet_obstacles ...` commands of a README (code and backticks), brackets
+    of optional parts removed, alternatives (a|b) taken as written."""
+    out = []
+    lines = [line for _lang, body in code_blocks(text) for line in body.splitlines()]
+    lines += re.findall(r"`([^`]*fleet_obstacles [^`]+)`", prose(text))
+    for line in lines:
+        m = re.search(r"\bfleet_obstacles\s+(.*)", line.split(" #", 1)[0])
+        if m:
+            words = shlex.split(m.group(1).replace("[", "").replace("]", ""))
+            out.append([PLACEHOLDERS.get(w, w) for w in words])
+    return out
+
+
+@pytest.mark.parametrize("doc", READMES, ids=rel)
+def test_every_fleet_obstacles_command_is_accepted_by_the_tool(doc):
+    commands_found = fleet_obstacles_commands(read(doc))
+    if not commands_found:
+        return
+    parse = fleet_obstacles_parser()
+    refused = []
+    for args in commands_found:
+        try:
+            parse(args)
+        except SystemExit:
+            refused.append(" ".join(args))
+    assert not refused, "%s: fleet_obstacles refuses: %s" % (rel(doc), "; ".join(refused))
+
+
 def test_the_checks_find_what_they_guard():
     """The checkers themselves: each names a made-up command, link and row."""
     assert check_command("roslaunch fleet_launch fleet.launch no_such_arg:=1")
@@ -250,3 +358,11 @@ def test_the_checks_find_what_they_guard():
     assert slug("On the real stack: upstream move_base and Stage (`move_base_fleet.launch`)") == \
         "on-the-real-stack-upstream-move_base-and-stage-move_base_fleetlaunch"
     assert table_rows("| a | 1 | b |\n|---|---|---|\n| x | y |") == ["| a | 1 | b |"]
+    doc = os.path.join(ROOT, "coaty_bridge", "README.md")
+    cited = outside_citations("as in issue 27; see DESIGN.md §6 and `../shared/COATY.md`, STYLE.md\n"
+                              "PR #12; [spec](https://example.org/docs/spec.md); CHANGELOG.md; ../README.md", doc)
+    assert len(cited) == 6 and all(":1:" in c for c in cited[:5]) and ":2: an issue (PR #12)" in cited[5], cited
+    assert any("../shared/COATY.md" in c for c in cited), cited
+    assert outside_citations("the archives in `../shared/upstream`", os.path.join(ROOT, "upstream", "README.md")) == []
+    assert fleet_obstacles_commands("`rosrun sharing_handler_py fleet_obstacles list|remove UUID`") == \
+        [["list|remove", "00000000-0000-4000-8000-000000000001"]]

@@ -498,7 +498,7 @@ int main(int argc, char** argv)
                 memory_text);
     std::fflush(stdout);
   }
-  std::printf("targets (issue 29): whole cycle <= 0.9 x upstream in every case; scan pass (updateBounds) <= 1.0 x with "
+  std::printf("targets: whole cycle <= 0.9 x upstream in every case; scan pass (updateBounds) <= 1.0 x with "
               "100 shared; heap beyond ObstacleLayer <= 1.0 B/cell: %s\n",
               all_met ? "all met" : "NOT all met (see above)");
   return 0;
