@@ -170,3 +170,15 @@ def test_speedup_reaches_stage_through_stage_world(stand_ins):
     assert "/stage_world --speedup 2.5 -u " in out, out
     rc, out = roslaunch(stand_ins, "--args", "/stageros", "fleet_launch", "move_base_fleet.launch")
     assert "/stage_world --speedup 1 -u " in out, out
+
+
+def test_record_true_records_what_the_replay_needs(stand_ins):
+    """record:=true as in fleet.launch: fleet_sim's record_bag.launch, whose topics include each robot's
+    footprint (the replay places the other robots with it)."""
+    rc, out = roslaunch(stand_ins, "--nodes", "fleet_launch", "move_base_fleet.launch", "record:=true")
+    assert rc == 0 and "/record_bag" in out.split(), out
+    rc, out = roslaunch(stand_ins, "--args", "/record_bag", "fleet_launch", "move_base_fleet.launch", "record:=true",
+                        "bag:=/tmp/x.bag")
+    assert rc == 0 and "-O /tmp/x.bag" in out and "global_costmap/footprint" in out, out
+    rc, out = roslaunch(stand_ins, "--nodes", "fleet_launch", "move_base_fleet.launch")
+    assert rc == 0 and "/record_bag" not in out.split(), out
