@@ -64,6 +64,7 @@ class _Robot:
             max_cells_per_message=s.max_cells_per_message,
             uuid_factory=lambda: str(uuidlib.UUID(int=rng.getrandbits(128), version=4)))
         self.queue = collections.deque()
+        self.placed_key = None   # the other robots' placement last given to the layer's exclusion
         self.stuck_pending = None
         self.scans = 0
         self.scans_dropped = 0
@@ -169,8 +170,13 @@ class _Robot:
             self.path.append((sx, sy))
         if replay.others is not None:
             # The other robots where they are at this scan: never shared, as the live fleet's layers
-            # never share the robots their bridges hear of.
-            self.core.fleet_robots.replace_all(replay.others.placed(stamp, self.name))
+            # never share the robots their bridges hear of. Set anew only when one moved by a millimetre
+            # or more (replace_all redraws every robot; parked ones need nothing).
+            placed = replay.others.placed(stamp, self.name)
+            key = tuple((name, tuple(np.round(polygon[:2].ravel(), 3))) for name, polygon, _ in placed)
+            if key != self.placed_key:
+                self.placed_key = key
+                self.core.fleet_robots.replace_all(placed)
         outcome = self.core.process_scan((sx, sy, sz), points, stamp)
         if not outcome.origin_in_map:
             replay.count("scans_origin_off_map")
