@@ -10,6 +10,7 @@ import rospy
 import rostest
 import tf2_ros
 from actionlib_msgs.msg import GoalStatus
+from geometry_msgs.msg import Twist
 from move_base_msgs.msg import MoveBaseAction
 from nav_msgs.msg import Path
 from std_msgs.msg import Empty
@@ -36,6 +37,36 @@ class NavWillow(unittest.TestCase):
         assert cls.client.wait_for_server(rospy.Duration(120.0)), "robot_0/move_base action server never came up"
         rospy.wait_for_service("/fleet_sim/add_block", 60.0)
         cls.add_block = rospy.ServiceProxy("/fleet_sim/add_block", AddBlock)
+        cls.move_robot_1_away()
+
+    @classmethod
+    def move_robot_1_away(cls):
+        """robot_1 stands beside robot_0's start. In this world the lasers sit on top of the 0.25 m bodies, so
+        (in Stage as in fleet_sim) neither robot sees the other, and robot_0, planning east, would drive into it:
+        this test has no use for robot_1, so it drives robot_1 ~robot_1_away [dx, dy] m (map frame) off the way
+        (cmd_vel; the pr2 is omnidirectional) and checks that it got there."""
+        dx, dy = rospy.get_param("~robot_1_away")
+        pub = rospy.Publisher("/robot_1/cmd_vel", Twist, queue_size=1)
+        end = rospy.get_time() + 10.0
+        while pub.get_num_connections() == 0 and rospy.get_time() < end:
+            rospy.sleep(0.1)
+        t1 = cls.tf.lookup_transform("map", "robot_1/base_link", rospy.Time(0), rospy.Duration(10.0)).transform
+        start = (t1.translation.x, t1.translation.y)
+        q = t1.rotation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        distance, speed = math.hypot(dx, dy), 0.3
+        twist = Twist()   # the map-frame direction in robot_1's own frame
+        twist.linear.x = speed * (math.cos(yaw) * dx + math.sin(yaw) * dy) / distance
+        twist.linear.y = speed * (-math.sin(yaw) * dx + math.cos(yaw) * dy) / distance
+        end = rospy.get_time() + distance / speed
+        rate = rospy.Rate(20)
+        while rospy.get_time() < end and not rospy.is_shutdown():
+            pub.publish(twist)
+            rate.sleep()
+        pub.publish(Twist())
+        t1 = cls.tf.lookup_transform("map", "robot_1/base_link", rospy.Time(0), rospy.Duration(10.0)).transform
+        moved = math.hypot(t1.translation.x - start[0], t1.translation.y - start[1])
+        assert moved > 0.8 * distance, "robot_1 moved %.2f m of %.2f off robot_0's way (a wall?)" % (moved, distance)
 
     def pose(self, frame="robot_0/base_link"):
         t = self.tf.lookup_transform("map", frame, rospy.Time(0), rospy.Duration(5.0))
@@ -78,10 +109,9 @@ class NavWillow(unittest.TestCase):
         x, y = self.pose()
         self.assertLess(math.hypot(x - gx, y - gy), 0.3)
         self.assertEqual([], self.stuck, "stuck_feedback on a free route")
-        # robot_1 stands beside robot_0's start and this test runs no Coaty bridge, so nothing tells robot_0's
-        # layer that it is a robot. When the first plan is made before the first scan is in (it depends on
-        # which node the machine runs first), the plan runs through robot_1 and the plan trigger proposes it.
-        # A proposal before the block exists may only be robot_1's cells.
+        # robot_1 stood beside robot_0's start and this test runs no Coaty bridge, so nothing tells robot_0's
+        # layer that it is a robot; robot_0 does not see it (see move_robot_1_away) but could have before robot_1
+        # moved off. A proposal before the block exists may only be robot_1's cells.
         r1x, r1y = self.pose("robot_1/base_link")
         for proposal in self.proposals:
             for cx, cy in self.cells(proposal):
