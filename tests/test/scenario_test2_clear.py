@@ -71,10 +71,10 @@ class Test2Clear(FleetTestCase):
         self.assertFalse(entered([p for p in r1.track if p[0] >= sent], fleet.corridor("middle")),
                          "robot_1 took the middle corridor")
 
+        # robot_1, driving up the cleared corridor, may see the rest of the place free and end the obstacle (on
+        # both robots at once), or leave what it did not see: either way both robots hold the same.
         same, lists = fleet.lists_identical()
         self.assertTrue(same, "obstacle lists differ: %s" % lists)
-        if cells:
-            self.assertIn(uuid, lists[0])
 
 
 if __name__ == "__main__":
