@@ -22,7 +22,7 @@ OUT = os.path.join(ROOT, "out", "bench")
 BENCHMARKS = {
     "core": ([os.path.join(DEVEL, "lib", "sharing_layer_cpp", "bench_core")],
              "sharing layer core: per-scan cost of monitoring vs raytrace + mark"),
-    "plugin_cycle": ([sys.executable, os.path.join(ROOT, "sharing_layer_cpp", "scripts", "bench_plugin_flags")],
+    "plugin_cycle": ([sys.executable, os.path.join(ROOT, "scripts", "bench_plugin_flags")],
                      "costmap_2d plugin: whole update cycle and scan pass against upstream ObstacleLayer, wall and CPU "
                      "clock, at -O2 and -O3 (each against upstream built alike)"),
     "layer_updates": ([sys.executable, os.path.join(ROOT, "sharing_layer_cpp", "scripts", "bench_layer_updates")],

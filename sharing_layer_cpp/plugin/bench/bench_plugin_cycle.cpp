@@ -15,7 +15,7 @@
 // Built only where costmap_2d is installed; needs a ROS master (parameters, topics):
 //   rosrun sharing_layer_cpp bench_plugin_cycle [rounds, default 500] [case 0..3, default all]
 // For both flag sets against an upstream built with the same ones: make bench NAME=plugin_cycle
-// (sharing_layer_cpp/scripts/bench_plugin_flags).
+// (scripts/bench_plugin_flags).
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>

@@ -5,7 +5,7 @@ import importlib.util
 import os
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-SCRIPT = os.path.join(os.path.dirname(HERE), "scripts", "bench_plugin_flags")
+SCRIPT = os.path.join(os.path.dirname(HERE), "bench_plugin_flags")
 
 
 def load():

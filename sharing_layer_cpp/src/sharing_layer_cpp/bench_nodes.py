@@ -3,8 +3,9 @@ ROS master, the a-priori map and the transforms, the global costmap of move_base
 in it (layer_host: move_base's Costmap2DROS and nothing else of move_base), the real sharing_handler node, a laser,
 the CPU time of a process, and the layer's and the handler's /diagnostics.
 
-Used by sharing_layer_cpp/scripts/bench_layer_updates and coaty_bridge/scripts/bench_flood. Needs the workspace
-built (`make build`: layer_host is built with the plugin) and sourced (scripts/env.sh).
+Used by sharing_layer_cpp/scripts/bench_layer_updates and coaty_bridge/scripts/bench_flood (and only by benches:
+it imports rospy, which the rest of the package does not). Needs the workspace built (`make build`: layer_host is
+built with the plugin) and sourced (scripts/env.sh).
 """
 import math
 import os
@@ -14,7 +15,6 @@ import sys
 import threading
 import time
 
-import rosparam
 import rospy
 import tf2_ros
 import yaml
@@ -24,8 +24,7 @@ from nav_msgs.msg import OccupancyGrid
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import UInt32MultiArray
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(os.path.dirname(HERE))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))))
 MOVE_BASE_CONFIG = os.path.join(ROOT, "launch", "config", "move_base")
 HANDLER = os.path.join(ROOT, "sharing_handler_py", "scripts", "sharing_handler")
 LAYER_HOST = os.path.join(ROOT, "catkin_ws", "devel", "lib", "sharing_layer_cpp", "layer_host")
@@ -117,7 +116,7 @@ class Graph:
 
 def set_params(namespace, values):
     for key, value in values.items():
-        rosparam.set_param_raw(namespace.rstrip("/") + "/" + key, value)
+        rospy.set_param(namespace.rstrip("/") + "/" + key, value)
 
 
 def load_yaml(name):
@@ -167,6 +166,20 @@ def robot_transforms(robot, x, y):
     laser.transform.translation.z = 0.1
     laser.transform.rotation.w = 1.0
     return [base, laser]
+
+
+class World:
+    """What the robots find on the master before their nodes start: the a-priori map on /map (latched, every cell
+    free, as map_server publishes it) and each robot's static transforms (robot -> (x, y))."""
+
+    def __init__(self, resolution, size_x, size_y, poses):
+        self.tf = tf2_ros.StaticTransformBroadcaster()
+        transforms = []
+        for robot, (x, y) in poses.items():
+            transforms += robot_transforms(robot, x, y)
+        self.tf.sendTransform(transforms)
+        self.map_pub = rospy.Publisher("/map", OccupancyGrid, queue_size=1, latch=True)
+        self.map_pub.publish(occupancy_grid(resolution, size_x, size_y))
 
 
 class Laser:
