@@ -80,6 +80,12 @@ public:
       }
       run_near_ = run_.empty() ? near : std::min(run_near_, near);
       run_.push_back(&line);
+      if (run_near_ == kNearSteps && line.end > kNearSteps)
+      {
+        // A run that fills kNearSteps keeps them (no shorter beam joins it): the beam's far steps now, while its line
+        // is at hand (later, at the flush, the 30 m scan took 3 % longer).
+        raytrace(line, kNearSteps + 1, line.end);
+      }
     }
     flush();
     return stats_;
@@ -241,18 +247,20 @@ private:
   }
 #endif
 
-  /// Fills steps 0 .. run_near_ of the run's beams, and raytraces each beam on from there.
+  /// Fills steps 0 .. run_near_ of the run's beams, and raytraces each beam on from there (in a run that fills
+  /// kNearSteps, done as each beam joined).
   void flush()
   {
     if (run_.empty())
     {
       return;
     }
+    const bool far_done = run_near_ == kNearSteps;  // (their steps beyond kNearSteps were raytraced as they joined)
     if (run_.size() < kMinRun)
     {
       for (const LineSteps* line : run_)
       {
-        raytrace(*line, 0, line->end);
+        raytrace(*line, 0, far_done ? std::min(line->end, kNearSteps) : line->end);
       }
       run_.clear();
       return;
@@ -298,20 +306,23 @@ private:
       }
       near_cells += top_b - bottom_b + 1;
       column += static_cast<std::size_t>(step_a);
-      // (carries without a branch: whether the extremes' b move is data, and mispredicted)
       top_error += top_b_len;
-      const bool top_carry = top_error >= top_a_len;
-      top_error -= top_carry ? top_a_len : 0;
-      top_b += top_carry;
+      if (top_error >= top_a_len)
+      {
+        top_error -= top_a_len;
+        ++top_b;
+      }
       bottom_error += bottom_b_len;
-      const bool bottom_carry = bottom_error >= bottom_a_len;
-      bottom_error -= bottom_carry ? bottom_a_len : 0;
-      bottom_b += bottom_carry;
+      if (bottom_error >= bottom_a_len)
+      {
+        bottom_error -= bottom_a_len;
+        ++bottom_b;
+      }
     }
     stats_.near_cells += near_cells;
     for (const LineSteps* line : run_)
     {
-      if (line->end > near)
+      if (!far_done && line->end > near)
       {
         raytrace(*line, near + 1, line->end);
       }
