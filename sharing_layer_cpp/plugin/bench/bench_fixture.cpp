@@ -15,7 +15,11 @@
 #include <costmap_2d/cost_values.h>
 #include <costmap_2d/footprint.h>
 #include <costmap_2d/layered_costmap.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
+#include <sharing_msgs/SharedObstacle.h>
+
+#include "../messages.h"
 
 namespace sharing_layer
 {
@@ -71,6 +75,92 @@ void MapOnce::updateCosts(costmap_2d::Costmap2D& master, int min_i, int min_j, i
     std::copy(costs_.begin() + j * size_x + min_i, costs_.begin() + j * size_x + max_i,
               master.getCharMap() + j * size_x + min_i);
   }
+}
+
+/// Shares every crate with the layer through its topic and waits until it has drawn them all (the outcome).
+namespace
+{
+bool shareCrates(const Scene& scene, costmap_2d::LayeredCostmap& costmap)
+{
+  ros::NodeHandle nh;
+  ros::Publisher pub = nh.advertise<sharing_msgs::SharedObstacle>("shared_obstacles", 200);
+  if (!spinUntil([&] { return pub.getNumSubscribers() > 0; }))
+  {
+    return false;
+  }
+  for (int i = 0; i < kCrates; ++i)
+  {
+    pub.publish(sharing_layer::toMessage(crateUpdate(scene, i), "map"));
+  }
+  return spinUntil([&] {
+    costmap.updateMap(scene.scan.origin.x, scene.scan.origin.y, 0.0);
+    int drawn = 0;
+    for (int i = 0; i < kCrates; ++i)
+    {
+      unsigned int mx = 0, my = 0;
+      costmap.getCostmap()->worldToMap(scene.crates[i].first + 0.001, scene.crates[i].second + 0.001, mx, my);
+      drawn += costmap.getCostmap()->getCost(mx, my) == costmap_2d::LETHAL_OBSTACLE;
+    }
+    return drawn == kCrates;
+  });
+}
+}  // namespace
+
+Stage::Stage(ros::NodeHandle& nh) : scene(makeScene()), master_map(masterMap(scene))
+{
+  tf.setUsingDedicatedThread(true);
+  geometry_msgs::TransformStamped laser;
+  laser.header.frame_id = "map";
+  laser.child_frame_id = "laser";
+  laser.transform.translation.x = scene.scan.origin.x;
+  laser.transform.translation.y = scene.scan.origin.y;
+  laser.transform.translation.z = scene.scan.origin.z;
+  laser.transform.rotation.w = 1.0;
+  tf.setTransform(laser, "bench", true);
+  cloud = laserCloud(scene);
+  path = plan(scene);
+  plan_pub = nh.advertise<nav_msgs::Path>("bench_plan", 1, true);
+  robots_pub = nh.advertise<sharing_msgs::RobotFootprintArray>("bench_fleet_robots", 1, true);
+  plan_pub.publish(path);
+  robots_pub.publish(fleetRobots());
+}
+
+void warmUp(Stage& stage, Subject<costmap_2d::ObstacleLayer>& upstream)
+{
+  for (int r = 0; r < 3; ++r)
+  {
+    upstream.layer->feed(stage.cloud);
+    upstream.costmap.updateMap(stage.scene.scan.origin.x, stage.scene.scan.origin.y, 0.0);
+  }
+}
+
+std::string warmUp(Stage& stage, ros::NodeHandle& nh, Subject<sharing_layer::SharingLayer>& ours, bool shared)
+{
+  const double x = stage.scene.scan.origin.x, y = stage.scene.scan.origin.y;
+  {
+    ros::Publisher map_pub = nh.advertise<nav_msgs::OccupancyGrid>("bench_map", 1, true);
+    map_pub.publish(occupancyGrid(stage.scene));
+    ours.layer->feed(stage.cloud);
+    ours.costmap.updateMap(x, y, 0.0);
+    if (!spinUntil([&] { return ours.layer->mapReceived() && ours.layer->planPoses() > 0; }))
+    {
+      return std::string("the layer did not receive the map and the plan within 60 s (map ") +
+             (ours.layer->mapReceived() ? "received" : "waiting") + ", plan " +
+             std::to_string(ours.layer->planPoses()) + " poses)";
+    }
+    map_pub.shutdown();
+  }
+  if (shared && !shareCrates(stage.scene, ours.costmap))
+  {
+    return "the shared crates did not reach the layer within 60 s";
+  }
+  for (int r = 0; r < 3; ++r)
+  {
+    ours.layer->feed(stage.cloud);
+    ours.costmap.updateMap(x, y, 0.0);
+  }
+  ros::spinOnce();
+  return "";
 }
 
 void setSource(const std::string& layer, double obstacle_range, double raytrace_range)

@@ -8,13 +8,17 @@
 #include <vector>
 
 #include <costmap_2d/layer.h>
+#include <costmap_2d/layered_costmap.h>
+#include <costmap_2d/obstacle_layer.h>
 #include <nav_msgs/OccupancyGrid.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sharing_msgs/RobotFootprintArray.h>
+#include <tf2_ros/buffer.h>
 
 #include "../../bench/reference_scene.h"
+#include "../sharing_layer.h"
 
 namespace sharing_layer
 {
@@ -84,6 +88,55 @@ private:
   const std::vector<unsigned char>& costs_;
   bool fresh_ = true;
 };
+
+/// One layer in its own LayeredCostmap behind the map layer, its cycle and scan pass timed on both clocks.
+template <class LayerType>
+struct Subject
+{
+  costmap_2d::LayeredCostmap costmap{ "map", false, false };
+  Fed<LayerType>* layer = nullptr;
+  Samples cycle, scan;
+
+  Subject(const std::vector<unsigned char>& master_map, const std::string& name, tf2_ros::Buffer& tf,
+          const sharing_layer::GridGeometry& g)
+  {
+    auto* map = new MapOnce(master_map);
+    costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(map));
+    map->initialize(&costmap, name + "_map", &tf);
+    layer = new Fed<LayerType>();
+    costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(layer));
+    layer->initialize(&costmap, name, &tf);
+    costmap.resizeMap(g.size_x, g.size_y, g.resolution, g.origin_x, g.origin_y);
+  }
+  /// One cycle with a fresh scan, timed.
+  void timedCycle(double x, double y)
+  {
+    const Stamp start = Stamp::now();
+    costmap.updateMap(x, y, 0.0);
+    cycle.add(Stamp::now().since(start));
+    scan.add(layer->bounds);
+  }
+};
+
+/// @brief What every subject needs around it: the scene, the master's a-priori costs, the laser's transform and its
+/// cloud, and, latched for ours, the plan and the fleet robots.
+struct Stage
+{
+  explicit Stage(ros::NodeHandle& nh);
+  Scene scene;
+  std::vector<unsigned char> master_map;
+  tf2_ros::Buffer tf;
+  sensor_msgs::PointCloud2 cloud;
+  nav_msgs::Path path;
+  ros::Publisher plan_pub, robots_pub;
+};
+
+/// @brief Three cycles of upstream's layer with the scene's scan.
+void warmUp(Stage& stage, Subject<costmap_2d::ObstacleLayer>& upstream);
+/// @brief Ours in steady state: the map topic's unknown cells (its publisher gone once received: the heap keeps what
+/// the layer keeps) and the static map read, the plan received, the crates shared when `shared` (through the layer's
+/// topic, drawn: the outcome), then three cycles. @return "" or what did not happen within 60 s
+std::string warmUp(Stage& stage, ros::NodeHandle& nh, Subject<sharing_layer::SharingLayer>& ours, bool shared);
 
 /// @brief The private parameters of an obstacle layer named `layer` (either kind): one PointCloud2 source "scan" that
 /// marks and clears with these ranges, and ours' topics renamed to the bench's.

@@ -22,15 +22,11 @@
 #include <string>
 #include <vector>
 
-#include <costmap_2d/cost_values.h>
 #include <costmap_2d/layered_costmap.h>
 #include <costmap_2d/obstacle_layer.h>
-#include <geometry_msgs/TransformStamped.h>
 #include <ros/ros.h>
-#include <sharing_msgs/SharedObstacle.h>
 #include <tf2_ros/buffer.h>
 
-#include "../messages.h"
 #include "../sharing_layer.h"
 #include "bench_fixture.h"
 
@@ -41,32 +37,6 @@
 namespace
 {
 using namespace sharing_layer::bench;
-
-/// Shares every crate with the layer through its topic and waits until it has drawn them all (the outcome).
-bool shareCrates(const Scene& scene, costmap_2d::LayeredCostmap& costmap)
-{
-  ros::NodeHandle nh;
-  ros::Publisher pub = nh.advertise<sharing_msgs::SharedObstacle>("shared_obstacles", 200);
-  if (!spinUntil([&] { return pub.getNumSubscribers() > 0; }))
-  {
-    return false;
-  }
-  for (int i = 0; i < kCrates; ++i)
-  {
-    pub.publish(sharing_layer::toMessage(crateUpdate(scene, i), "map"));
-  }
-  return spinUntil([&] {
-    costmap.updateMap(scene.scan.origin.x, scene.scan.origin.y, 0.0);
-    int drawn = 0;
-    for (int i = 0; i < kCrates; ++i)
-    {
-      unsigned int mx = 0, my = 0;
-      costmap.getCostmap()->worldToMap(scene.crates[i].first + 0.001, scene.crates[i].second + 0.001, mx, my);
-      drawn += costmap.getCostmap()->getCost(mx, my) == costmap_2d::LETHAL_OBSTACLE;
-    }
-    return drawn == kCrates;
-  });
-}
 
 struct Case
 {
@@ -96,34 +66,6 @@ std::string judged(double ratio, double target, const std::string& subject, std:
   return text;
 }
 
-/// One layer in its own LayeredCostmap behind the map layer, its cycle and scan pass timed on both clocks.
-template <class LayerType>
-struct Subject
-{
-  costmap_2d::LayeredCostmap costmap{ "map", false, false };
-  Fed<LayerType>* layer = nullptr;
-  Samples cycle, scan;
-
-  Subject(const std::vector<unsigned char>& master_map, const std::string& name, tf2_ros::Buffer& tf,
-          const sharing_layer::GridGeometry& g)
-  {
-    auto* map = new MapOnce(master_map);
-    costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(map));
-    map->initialize(&costmap, name + "_map", &tf);
-    layer = new Fed<LayerType>();
-    costmap.addPlugin(boost::shared_ptr<costmap_2d::Layer>(layer));
-    layer->initialize(&costmap, name, &tf);
-    costmap.resizeMap(g.size_x, g.size_y, g.resolution, g.origin_x, g.origin_y);
-  }
-  /// One cycle with a fresh scan, timed.
-  void timedCycle(double x, double y)
-  {
-    const Stamp start = Stamp::now();
-    costmap.updateMap(x, y, 0.0);
-    cycle.add(Stamp::now().since(start));
-    scan.add(layer->bounds);
-  }
-};
 }  // namespace
 
 int main(int argc, char** argv)
@@ -132,24 +74,9 @@ int main(int argc, char** argv)
   ros::NodeHandle nh;
   const int rounds = argc > 1 ? std::max(5, std::atoi(argv[1])) : 500;
   const int only_case = argc > 2 ? std::atoi(argv[2]) : -1;  // one case (0..3) alone, e.g. under a profiler
-  const Scene scene = makeScene();
-  const std::vector<unsigned char> master_map = masterMap(scene);
-  tf2_ros::Buffer tf;
-  tf.setUsingDedicatedThread(true);
-  geometry_msgs::TransformStamped laser;
-  laser.header.frame_id = "map";
-  laser.child_frame_id = "laser";
-  laser.transform.translation.x = scene.scan.origin.x;
-  laser.transform.translation.y = scene.scan.origin.y;
-  laser.transform.translation.z = scene.scan.origin.z;
-  laser.transform.rotation.w = 1.0;
-  tf.setTransform(laser, "bench", true);
-  const sensor_msgs::PointCloud2 cloud = laserCloud(scene);
-  const nav_msgs::Path path = plan(scene);
-  ros::Publisher plan_pub = nh.advertise<nav_msgs::Path>("bench_plan", 1, true);
-  ros::Publisher robots_pub = nh.advertise<sharing_msgs::RobotFootprintArray>("bench_fleet_robots", 1, true);
-  plan_pub.publish(path);
-  robots_pub.publish(fleetRobots());
+  Stage stage(nh);
+  const Scene& scene = stage.scene;
+  const nav_msgs::Path& path = stage.path;
   const double cells = static_cast<double>(scene.geometry.cellCount());
 
   std::printf("bench_plugin_cycle: %s\n", machine().c_str());
@@ -174,49 +101,24 @@ int main(int argc, char** argv)
     setSource("ours_" + tag, c.obstacle_range, c.raytrace_range);
     const double x = scene.scan.origin.x, y = scene.scan.origin.y;
 
-    // Upstream: built, fed and warmed up between two heap readings.
+    // Upstream, then ours: each built, fed and warmed up between two heap readings.
     const double heap0 = heapBytes();
-    Subject<costmap_2d::ObstacleLayer> upstream(master_map, "upstream_" + tag, tf, scene.geometry);
-    for (int r = 0; r < 3; ++r)
-    {
-      upstream.layer->feed(cloud);
-      upstream.costmap.updateMap(x, y, 0.0);
-    }
+    Subject<costmap_2d::ObstacleLayer> upstream(stage.master_map, "upstream_" + tag, stage.tf, scene.geometry);
+    warmUp(stage, upstream);
     const double heap1 = heapBytes();
-
-    // Ours: the same, plus the map topic (its publisher gone once received: the heap keeps what the layer keeps),
-    // the plan, the fleet robots and, in the shared cases, the crates.
-    Subject<sharing_layer::SharingLayer> ours(master_map, "ours_" + tag, tf, scene.geometry);
+    Subject<sharing_layer::SharingLayer> ours(stage.master_map, "ours_" + tag, stage.tf, scene.geometry);
+    const std::string failed = warmUp(stage, nh, ours, c.shared);
+    if (!failed.empty())
     {
-      ros::Publisher map_pub = nh.advertise<nav_msgs::OccupancyGrid>("bench_map", 1, true);
-      map_pub.publish(occupancyGrid(scene));
-      ours.layer->feed(cloud);
-      ours.costmap.updateMap(x, y, 0.0);
-      if (!spinUntil([&] { return ours.layer->mapReceived() && ours.layer->planPoses() > 0; }))
-      {
-        std::fprintf(stderr, "bench_plugin_cycle: the layer did not receive the map and the plan within 60 s (map %s, "
-                     "plan %zu poses)\n", ours.layer->mapReceived() ? "received" : "waiting", ours.layer->planPoses());
-        return 2;
-      }
-      map_pub.shutdown();
-    }
-    if (c.shared && !shareCrates(scene, ours.costmap))
-    {
-      std::fprintf(stderr, "bench_plugin_cycle: the shared crates did not reach the layer within 60 s\n");
+      std::fprintf(stderr, "bench_plugin_cycle: %s\n", failed.c_str());
       return 2;
     }
-    for (int r = 0; r < 3; ++r)
-    {
-      ours.layer->feed(cloud);
-      ours.costmap.updateMap(x, y, 0.0);
-    }
-    ros::spinOnce();
     const double heap2 = heapBytes();
 
     for (int r = 0; r < rounds; ++r)
     {
-      upstream.layer->feed(cloud);
-      ours.layer->feed(cloud);
+      upstream.layer->feed(stage.cloud);
+      ours.layer->feed(stage.cloud);
       if (r % 2 == 0)  // even rounds upstream first, odd rounds ours
       {
         upstream.timedCycle(x, y);
