@@ -108,15 +108,22 @@ bool shareCrates(const Scene& scene, costmap_2d::LayeredCostmap& costmap)
 
 Stage::Stage(ros::NodeHandle& nh) : scene(makeScene()), master_map(masterMap(scene))
 {
+  // A robot's frames, as on move_base: map -> odom -> base_link (at the scan's origin) -> laser. Ours compares the
+  // odometry with the localisation every cycle (two lookups), as it does on a robot.
   tf.setUsingDedicatedThread(true);
-  geometry_msgs::TransformStamped laser;
-  laser.header.frame_id = "map";
-  laser.child_frame_id = "laser";
-  laser.transform.translation.x = scene.scan.origin.x;
-  laser.transform.translation.y = scene.scan.origin.y;
-  laser.transform.translation.z = scene.scan.origin.z;
-  laser.transform.rotation.w = 1.0;
-  tf.setTransform(laser, "bench", true);
+  const auto frame = [&](const char* parent, const char* child, double x, double y, double z) {
+    geometry_msgs::TransformStamped t;
+    t.header.frame_id = parent;
+    t.child_frame_id = child;
+    t.transform.translation.x = x;
+    t.transform.translation.y = y;
+    t.transform.translation.z = z;
+    t.transform.rotation.w = 1.0;
+    tf.setTransform(t, "bench", true);
+  };
+  frame("map", "odom", 0.0, 0.0, 0.0);
+  frame("odom", "base_link", scene.scan.origin.x, scene.scan.origin.y, 0.0);
+  frame("base_link", "laser", 0.0, 0.0, scene.scan.origin.z);
   cloud = laserCloud(scene);
   path = plan(scene);
   plan_pub = nh.advertise<nav_msgs::Path>("bench_plan", 1, true);
