@@ -152,20 +152,20 @@ def occupancy_grid(resolution, size_x, size_y):
 
 
 def robot_transforms(robot, x, y):
-    """map -> <robot>/base_link at (x, y), and the laser 0.1 m up, as static transforms."""
-    base = TransformStamped()
-    base.header.stamp = rospy.Time.now()
-    base.header.frame_id = "map"
-    base.child_frame_id = robot + "/base_link"
-    base.transform.translation.x, base.transform.translation.y = x, y
-    base.transform.rotation.w = 1.0
-    laser = TransformStamped()
-    laser.header.stamp = base.header.stamp
-    laser.header.frame_id = robot + "/base_link"
-    laser.child_frame_id = robot + "/base_laser_link"
-    laser.transform.translation.z = 0.1
-    laser.transform.rotation.w = 1.0
-    return [base, laser]
+    """A robot's frames at (x, y), as static transforms: map -> <robot>/odom (fake_localization's) -> <robot>/base_link
+    (the odometry's) -> <robot>/base_laser_link 0.1 m up. The layer compares odometry with localisation every cycle."""
+    stamp = rospy.Time.now()
+
+    def frame(parent, child, tx, ty, tz):
+        t = TransformStamped()
+        t.header.stamp = stamp
+        t.header.frame_id, t.child_frame_id = parent, child
+        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = tx, ty, tz
+        t.transform.rotation.w = 1.0
+        return t
+
+    return [frame("map", robot + "/odom", 0.0, 0.0, 0.0), frame(robot + "/odom", robot + "/base_link", x, y, 0.0),
+            frame(robot + "/base_link", robot + "/base_laser_link", 0.0, 0.0, 0.1)]
 
 
 class World:
