@@ -9,7 +9,7 @@
 // layer adds (mallinfo2 around building, feeding and warming up each costmap), per cell, ours beyond upstream's,
 // with beside it what the layer counts itself (SharingLayer::perCellBytes: the core's grids and the map's unknown).
 // Every subject is timed on two clocks, the wall clock and the thread's CPU clock (on a shared machine the wall clock
-// also counts the time other processes held the core), and both are printed with the targets (issue 48), "NOT MET"
+// also counts the time other processes held the core), and both are printed with the targets, "NOT MET"
 // where missed; the exit code never depends on them. The header names the machine, its load and both builds.
 //
 // Built only where costmap_2d is installed; needs a ROS master (parameters, topics):
