@@ -22,6 +22,12 @@ OUT = os.path.join(ROOT, "out", "bench")
 BENCHMARKS = {
     "core": ([os.path.join(DEVEL, "lib", "sharing_layer_cpp", "bench_core")],
              "sharing layer core: per-scan cost of monitoring vs raytrace + mark"),
+    "plugin_cycle": ([sys.executable, os.path.join(ROOT, "scripts", "bench_plugin_flags")],
+                     "costmap_2d plugin: whole update cycle and scan pass against upstream ObstacleLayer, wall and CPU "
+                     "clock, at -O2 and -O3 (each against upstream built alike)"),
+    "layer_updates": ([sys.executable, os.path.join(ROOT, "sharing_layer_cpp", "scripts", "bench_layer_updates")],
+                      "what applying a shared obstacle costs the layer against the handler, as nodes, with 10, 1,000 "
+                      "and 10,000 obstacles held"),
     "bindings": ([sys.executable, os.path.join(ROOT, "sharing_layer_cpp", "scripts", "bench_bindings")],
                  "pybind11 call overhead as a ratio of process_scan"),
     "handler": ([sys.executable, os.path.join(ROOT, "sharing_handler_py", "scripts", "bench_handler")],
@@ -35,8 +41,9 @@ BENCHMARKS = {
              "a robot joining a running fleet of 40 (400 obstacles held by each): Resolves, bytes and time until "
              "it has every obstacle, creator answers vs everyone answers"),
     "flood": ([sys.executable, os.path.join(ROOT, "coaty_bridge", "scripts", "bench_flood")],
-              "one peer floods 5,000 valid new obstacles at 3 robots: p99 latency of another robot's obstacle, "
-              "handler cost per update with 10,000 vs 10 held"),
+              "one login floods 5,000 valid new obstacles at 3 robots' bridge, handler and costmap nodes: p99 "
+              "latency of another robot's obstacle into the costmaps, CPU per update of layer and handler, handler "
+              "cost per update with 10,000 vs 10 held"),
     "sim": ([sys.executable, os.path.join(ROOT, "fleet_sim", "scripts", "bench_sim")],
             "simulator: real-time factor for 2 and 20 robots"),
     "nav": ([sys.executable, os.path.join(ROOT, "fleet_nav", "scripts", "bench_nav")],

@@ -169,6 +169,7 @@ void SharingLayer::sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& 
       }
     }
     const ApplyResult result = core_->applyShared(update, ros::Time::now().toSec());
+    fleet_applied_ += result.ok;
     if (!result.ok)
     {
       ROS_WARN_THROTTLE(1.0, "SharingLayer (%s): ignoring shared obstacle: %s", params_.robot_name.c_str(),
@@ -189,7 +190,9 @@ void SharingLayer::sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& 
 void SharingLayer::expiredCallback(const std_msgs::String::ConstPtr& msg)
 {
   std::lock_guard<std::mutex> lock(core_mutex_);
-  if (core_ && !core_->expire(msg->data))
+  const bool expired = core_ && core_->expire(msg->data);
+  fleet_applied_ += expired;
+  if (core_ && !expired)
   {
     ROS_DEBUG("SharingLayer (%s): expired obstacle %s was not known", params_.robot_name.c_str(), msg->data.c_str());
   }

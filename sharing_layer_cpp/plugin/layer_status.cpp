@@ -223,6 +223,7 @@ void SharingLayer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
   status.add("proposals published", proposals_published_);
   status.add("updates published", updates_published_);
   status.add("shared obstacles held", core_ ? core_->sharedObstacles().size() : std::size_t(0));
+  status.add("fleet messages applied", fleet_applied_);
   status.add("fleet messages rejected", fleet_rejected_);
   if (!last_rejection_.empty())
   {

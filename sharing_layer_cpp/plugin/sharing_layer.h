@@ -216,6 +216,7 @@ private:
   unsigned long proposals_published_ = 0;
   unsigned long updates_published_ = 0;
   unsigned long fleet_rejected_ = 0;        ///< shared obstacles ignored (before the map, bad, refused by the core)
+  unsigned long fleet_applied_ = 0;         ///< shared obstacles and expiries applied (the benches count on it)
   std::string last_rejection_;
   std::string last_refusal_;                ///< the last refused reconfiguration, with its reason
   // dynamic_reconfigure: accepted values wait here for the next updateBounds (core_mutex_).

@@ -21,15 +21,17 @@ constexpr int kMaxReciprocalRow = 32767;
 /// Lines longer than this along a are not grouped (no grid holds them: a bound for the arithmetic of closeTo).
 constexpr std::uint64_t kMaxRunLength = std::uint64_t{ 1 } << 24;
 
-/// Runs shorter than this are raytraced beam by beam: the fill's per-step work would cost more than it saves.
-constexpr std::size_t kMinRun = 3;
+/// Runs shorter than this are raytraced beam by beam: the fill's per-step work would cost more than it saves (on the
+/// reference scan at 3 m and 30 m, -O2, 8 did best of 3, 6, 8, 12 and 16: the beams that end on a pillar close to
+/// the sensor make many short runs).
+constexpr std::size_t kMinRun = 8;
+/// Beams ending before this step are raytraced alone: too short for a fill to save anything.
+constexpr unsigned int kMinNearSteps = 8;
 
-/// -1, 0, 1 as line j's slope abs_db / abs_da is below, equal to, above line k's
-int compareSlope(const LineSteps& j, const LineSteps& k)
+/// The steps a near-field fill could cover on this line.
+unsigned int nearSteps(const LineSteps& line)
 {
-  const std::uint64_t l = static_cast<std::uint64_t>(j.abs_db) * k.abs_da;
-  const std::uint64_t r = static_cast<std::uint64_t>(k.abs_db) * j.abs_da;
-  return (l > r) - (l < r);
+  return std::min(line.end, kNearSteps);
 }
 
 /// The octant of a line: its dominant axis and the signs along a and b (a b sign of 0, a line along a, goes with +).
@@ -50,22 +52,38 @@ public:
   {
     run_.clear();
     int run_octant = -1;
-    for (const LineSteps& line : lines)
+    for (std::size_t i = 0; i < lines.size(); ++i)
     {
-      if (line.end < kNearSteps)
+      const LineSteps& line = lines[i];
+      // A run fills steps 0 .. its shortest beam's near steps (at most kNearSteps): with raytrace_range 3 m every beam
+      // ends before kNearSteps, and its beams overlap as much near the sensor (issue 48). A beam shorter than the run
+      // would cut the fill short for the others: in a run that fills all kNearSteps any shorter one, in one that
+      // fills fewer one a quarter shorter. Such a beam is raytraced alone when it is one (it ended on something
+      // close); when the next is as short, the beams shrink along the octant (those cut at raytrace_range do), and
+      // it starts a run of its own, as does one a third longer than the run's.
+      const unsigned int near = nearSteps(line);
+      const auto shorter = [this](unsigned int steps) {
+        return !run_.empty() && steps < run_near_ && (run_near_ == kNearSteps || 4 * steps < 3 * run_near_);
+      };
+      const bool short_line = shorter(near);
+      if (near < kMinNearSteps || (short_line && (i + 1 == lines.size() || !shorter(nearSteps(lines[i + 1])))))
       {
-        raytrace(line, 0, line.end);  // too short to share the near field
+        raytrace(line, 0, line.end);
         continue;
       }
       const int o = octant(line);
-      if (o != run_octant || !closeTo(*run_.back(), line))
+      if (o != run_octant || short_line || 3 * near > 4 * run_near_ ||
+          !closeTo(*run_.back(), line, std::min(near, nearSteps(*run_.back()))))
       {
         flush();
         run_octant = o;
       }
+      run_near_ = run_.empty() ? near : std::min(run_near_, near);
       run_.push_back(&line);
-      if (line.end > kNearSteps)
+      if (run_near_ == kNearSteps && line.end > kNearSteps)
       {
+        // A run that fills kNearSteps keeps them (no shorter beam joins it): the beam's far steps now, while its line
+        // is at hand (later, at the flush, the 30 m scan took 3 % longer).
         raytrace(line, kNearSteps + 1, line.end);
       }
     }
@@ -74,9 +92,10 @@ public:
   }
 
 private:
-  /// Whether beam k's line stays within one cell of the run's last beam j along b over the near steps:
-  /// kNearSteps |B_k / A_k - B_j / A_j| + 1 / (2 min(A_j, A_k)) < 1, times 2 A_j A_k.
-  static bool closeTo(const LineSteps& j, const LineSteps& k)
+  /// Whether beam k's line stays within one cell of the run's last beam j along b over the first `steps` steps:
+  /// steps |B_k / A_k - B_j / A_j| + 1 / (2 min(A_j, A_k)) < 1, times 2 A_j A_k. (A run's fill covers no more steps
+  /// than its shortest beam's near steps, so the steps of the shorter of two neighbours are enough.)
+  static bool closeTo(const LineSteps& j, const LineSteps& k, unsigned int steps)
   {
     const std::uint64_t aj = j.abs_da, bj = j.abs_db, ak = k.abs_da, bk = k.abs_db;
     if (std::max(aj, ak) > kMaxRunLength)
@@ -84,7 +103,7 @@ private:
       return false;  // (the products below stay far inside 64 bits)
     }
     const std::uint64_t cross = bk * aj > bj * ak ? bk * aj - bj * ak : bj * ak - bk * aj;
-    return 2 * static_cast<std::uint64_t>(kNearSteps) * cross + std::max(aj, ak) < 2 * aj * ak;
+    return 2 * static_cast<std::uint64_t>(steps) * cross + std::max(aj, ak) < 2 * aj * ak;
   }
 
   std::ptrdiff_t stepA(const LineSteps& line) const { return line.x_major ? line.sign_a : line.sign_a * row_; }
@@ -228,18 +247,20 @@ private:
   }
 #endif
 
-  /// Fills steps 0 .. kNearSteps of the run's beams (their later steps are raytraced already).
+  /// Fills steps 0 .. run_near_ of the run's beams, and raytraces each beam on from there (in a run that fills
+  /// kNearSteps, done as each beam joined).
   void flush()
   {
     if (run_.empty())
     {
       return;
     }
+    const bool far_done = run_near_ == kNearSteps;  // (their steps beyond kNearSteps were raytraced as they joined)
     if (run_.size() < kMinRun)
     {
       for (const LineSteps* line : run_)
       {
-        raytrace(*line, 0, std::min(line->end, kNearSteps));
+        raytrace(*line, 0, far_done ? std::min(line->end, kNearSteps) : line->end);
       }
       run_.clear();
       return;
@@ -247,23 +268,35 @@ private:
     ++stats_.groups;
     stats_.grouped_beams += run_.size();
     // At every step b only grows with the slope (see clearFan), so the run covers the b of its least and its
-    // greatest slope and every b between.
-    std::size_t steepest = 0, flattest = 0;
+    // greatest slope and every b between. The slopes are compared exactly (cross-multiplied), the extremes' lengths
+    // held in registers: looked up through the last extreme's line, each comparison waited on two loads.
+    const LineSteps* top = run_[0];
+    const LineSteps* bottom = run_[0];
+    std::uint64_t top_da = top->abs_da, top_db = top->abs_db, bottom_da = top_da, bottom_db = top_db;
     for (std::size_t k = 1; k < run_.size(); ++k)
     {
-      steepest = compareSlope(*run_[k], *run_[steepest]) > 0 ? k : steepest;
-      flattest = compareSlope(*run_[k], *run_[flattest]) < 0 ? k : flattest;
+      const LineSteps* line = run_[k];
+      const std::uint64_t da = line->abs_da, db = line->abs_db;
+      const bool steeper = db * top_da > top_db * da, flatter = db * bottom_da < bottom_db * da;
+      top = steeper ? line : top;
+      top_da = steeper ? da : top_da;
+      top_db = steeper ? db : top_db;
+      bottom = flatter ? line : bottom;
+      bottom_da = flatter ? da : bottom_da;
+      bottom_db = flatter ? db : bottom_db;
     }
-    const LineSteps& top = *run_[steepest];
-    const LineSteps& bottom = *run_[flattest];
-    const std::ptrdiff_t step_a = stepA(top);  // (the run's lines share their octant)
-    const std::ptrdiff_t step_b = stepB(top);
-    std::uint32_t top_error = top.abs_da / 2, bottom_error = bottom.abs_da / 2;  // as bresenham2D starts
+    const std::ptrdiff_t step_a = stepA(*top);  // (the run's lines share their octant)
+    const std::ptrdiff_t step_b = stepB(*top);
+    const std::uint32_t top_a_len = top->abs_da, top_b_len = top->abs_db;
+    const std::uint32_t bottom_a_len = bottom->abs_da, bottom_b_len = bottom->abs_db;
+    std::uint32_t top_error = top_a_len / 2, bottom_error = bottom_a_len / 2;  // as bresenham2D starts
     std::uint32_t top_b = 0, bottom_b = 0;
     std::size_t column = origin_;  // the cell at step s, b = 0
     std::uint8_t* const costs = costs_;  // (locals: see raytraceSse2)
     const std::uint8_t value = value_;
-    for (unsigned int s = 0; s <= kNearSteps; ++s)
+    const unsigned int near = run_near_;
+    std::size_t near_cells = 0;
+    for (unsigned int s = 0; s <= near; ++s)
     {
       std::size_t cell = column + static_cast<std::size_t>(step_b * static_cast<std::ptrdiff_t>(bottom_b));
       for (std::uint32_t b = bottom_b; b <= top_b; ++b)
@@ -271,19 +304,27 @@ private:
         costs[cell] = value;
         cell += static_cast<std::size_t>(step_b);
       }
-      stats_.near_cells += top_b - bottom_b + 1;
+      near_cells += top_b - bottom_b + 1;
       column += static_cast<std::size_t>(step_a);
-      top_error += top.abs_db;
-      if (top_error >= top.abs_da)
+      top_error += top_b_len;
+      if (top_error >= top_a_len)
       {
-        top_error -= top.abs_da;
+        top_error -= top_a_len;
         ++top_b;
       }
-      bottom_error += bottom.abs_db;
-      if (bottom_error >= bottom.abs_da)
+      bottom_error += bottom_b_len;
+      if (bottom_error >= bottom_a_len)
       {
-        bottom_error -= bottom.abs_da;
+        bottom_error -= bottom_a_len;
         ++bottom_b;
+      }
+    }
+    stats_.near_cells += near_cells;
+    for (const LineSteps* line : run_)
+    {
+      if (!far_done && line->end > near)
+      {
+        raytrace(*line, near + 1, line->end);
       }
     }
     run_.clear();
@@ -295,6 +336,7 @@ private:
   std::uint8_t value_;
   FanStats stats_;
   std::vector<const LineSteps*>& run_ = scratch().run;  ///< the run being gathered, in scan order
+  unsigned int run_near_ = 0;  ///< the steps its fill covers: the least of its beams' near steps
 
   /// Kept from fan to fan (per thread), so that a scan does not allocate them again.
   struct Scratch

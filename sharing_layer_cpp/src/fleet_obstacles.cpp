@@ -150,25 +150,33 @@ ApplyResult FleetObstacles::apply(const ObstacleUpdate& update, double now_s, co
     obstacle.last_observation = now_s;
     found = shared_.emplace(update.uuid, std::move(obstacle)).first;
     result.added = true;
-    view_index_stale_ = true;
+    index_.add(found->second);
     markMonitored(found->second.rectangle_cells, true, g);
     observed.dropInside(found->second.rectangle_cells, g, flags);
   }
   SharedObstacle& obstacle = found->second;
-  growRectangle(obstacle, update.rectangle, g, observed, flags);
+  const bool grown = growRectangle(obstacle, update.rectangle, g, observed, flags);
   if (!update.marked.empty())
   {
     obstacle.last_observation = now_s;
   }
   obstacle.max_version = std::max(obstacle.max_version, update.version);
   result.changed = obstacle.cells.apply(update.marked, update.cleared, update.version, update.source);
-  watch_flags_stale_ |= result.changed != 0;
   for (std::uint32_t index : update.marked)
   {
     obstacle.free_streaks.erase(index);  // a robot saw it occupied: evidence of free space starts again
   }
-  markDirty(update.marked, g);
-  markDirty(update.cleared, g);
+  if (result.changed != 0 || grown)
+  {
+    index_.changed(obstacle);
+  }
+  // Only a change of what is drawn dirties the master: a renewal (cells present already) redraws nothing, and with
+  // many obstacles held the bounds of unchanged ones far apart made every cycle redraw most of the map (issue 48).
+  if (result.changed != 0)
+  {
+    markDirty(update.marked, g);
+    markDirty(update.cleared, g);
+  }
   result.ok = true;
   return result;
 }
@@ -182,56 +190,23 @@ bool FleetObstacles::expire(const std::string& uuid, const GridGeometry& g)
   }
   markDirty(found->second.cells.present(), g);
   const CellRect rectangle = found->second.rectangle_cells;
+  index_.remove(found->second);
   shared_.erase(found);
   unmarkMonitored(rectangle, g);
-  watch_flags_stale_ = true;
-  view_index_stale_ = true;
   return true;
 }
 
 void FleetObstacles::refreshWatchFlags(const GridGeometry& g, CellFlags& flags)
 {
-  if (!watch_flags_stale_)
-  {
-    return;
-  }
-  for (std::uint32_t index : flagged_cells_)
-  {
-    flags.clear(index, ScanWatch::kFlaggedWatched);
-  }
-  flagged_cells_.clear();
-  for (auto& entry : shared_)
-  {
-    SharedObstacle& obstacle = entry.second;
-    const std::vector<std::uint32_t>& present = obstacle.cells.present();
-    obstacle.present_box = CellRect{ 0, 0, -1, -1 };
-    if (present.empty())
-    {
-      continue;
-    }
-    // Sorted: the first and last cells give the rows.
-    CellRect box{ std::numeric_limits<int>::max(), static_cast<int>(present.front() / g.size_x),
-                  std::numeric_limits<int>::min(), static_cast<int>(present.back() / g.size_x) };
-    for (std::uint32_t index : present)
-    {
-      const int x = static_cast<int>(index % g.size_x);
-      box.min_x = std::min(box.min_x, x);
-      box.max_x = std::max(box.max_x, x);
-      flags.set(index, ScanWatch::kFlaggedWatched);
-    }
-    flagged_cells_.insert(flagged_cells_.end(), present.begin(), present.end());
-    obstacle.present_box = box;
-  }
-  watch_flags_stale_ = false;
+  index_.refreshWatchFlags(g, flags);
 }
 
 void FleetObstacles::inView(double x, double y, double radius, std::vector<SharedObstacle*>& in_view,
                             std::vector<CellRect>& present_boxes)
 {
-  refreshViewIndex();
-  for (const ViewEntry& entry : view_index_)  // contiguous: no walk through the map's nodes
+  for (const ObstacleIndex::Entry& entry : index_.entries())  // contiguous: no walk through the map's nodes
   {
-    if (entry.rectangle.withinRadius(x, y, radius))
+    if (!entry.rectangle_cells.empty() && entry.rectangle.withinRadius(x, y, radius))
     {
       in_view.push_back(entry.obstacle);
       if (!entry.obstacle->present_box.empty())
@@ -240,24 +215,6 @@ void FleetObstacles::inView(double x, double y, double radius, std::vector<Share
       }
     }
   }
-}
-
-void FleetObstacles::refreshViewIndex()
-{
-  if (!view_index_stale_)
-  {
-    return;
-  }
-  view_index_.clear();
-  for (auto& entry : shared_)
-  {
-    SharedObstacle& obstacle = entry.second;
-    if (!obstacle.rectangle_cells.empty())
-    {
-      view_index_.push_back(ViewEntry{ obstacle.rectangle, &obstacle });
-    }
-  }
-  view_index_stale_ = false;
 }
 
 void FleetObstacles::monitor(const std::vector<SharedObstacle*>& in_view, ScanEvidence& evidence, double now_s,
@@ -285,9 +242,12 @@ void FleetObstacles::monitor(const std::vector<SharedObstacle*>& in_view, ScanEv
     update.version = obstacle->max_version + 1;
     update.stamp = now_s;
     obstacle->max_version = update.version;
-    watch_flags_stale_ |= obstacle->cells.apply(update.marked, update.cleared, update.version, update.source) != 0;
-    markDirty(update.marked, g);
-    markDirty(update.cleared, g);
+    if (obstacle->cells.apply(update.marked, update.cleared, update.version, update.source) != 0)
+    {
+      index_.changed(*obstacle);
+      markDirty(update.marked, g);
+      markDirty(update.cleared, g);
+    }
     updates.push_back(std::move(update));
   }
 }
@@ -434,27 +394,30 @@ void FleetObstacles::growInto(SharedObstacle& obstacle, std::vector<std::uint32_
     max_x = std::max(max_x, cx + half);
     max_y = std::max(max_y, cy + half);
   }
-  growRectangle(obstacle, Subsection(min_x, min_y, max_x, max_y), g, observed, flags);
+  if (growRectangle(obstacle, Subsection(min_x, min_y, max_x, max_y), g, observed, flags))
+  {
+    index_.changed(obstacle);
+  }
   marked.insert(marked.end(), grown.begin(), grown.end());
   std::sort(marked.begin(), marked.end());
   marked.erase(std::unique(marked.begin(), marked.end()), marked.end());
 }
 
-void FleetObstacles::growRectangle(SharedObstacle& obstacle, const Subsection& rectangle, const GridGeometry& g,
+bool FleetObstacles::growRectangle(SharedObstacle& obstacle, const Subsection& rectangle, const GridGeometry& g,
                                    ObservedCells& observed, CellFlags& flags)
 {
   const Subsection& r = obstacle.rectangle;
   if (rectangle.min_x >= r.min_x && rectangle.min_y >= r.min_y && rectangle.max_x <= r.max_x &&
       rectangle.max_y <= r.max_y)
   {
-    return;
+    return false;
   }
   obstacle.rectangle = Subsection(std::min(r.min_x, rectangle.min_x), std::min(r.min_y, rectangle.min_y),
                                   std::max(r.max_x, rectangle.max_x), std::max(r.max_y, rectangle.max_y));
   obstacle.rectangle_cells = obstacle.rectangle.cells(g);
   markMonitored(obstacle.rectangle_cells, true, g);  // the grown rectangle holds the old one
   observed.dropInside(obstacle.rectangle_cells, g, flags);
-  view_index_stale_ = true;
+  return true;
 }
 
 void FleetObstacles::markMonitored(const CellRect& rect, bool monitored, const GridGeometry& g)
@@ -473,9 +436,9 @@ void FleetObstacles::unmarkMonitored(const CellRect& rect, const GridGeometry& g
 {
   // Rectangles overlap: unmark the area, then mark again what the others still cover of it.
   markMonitored(rect, false, g);
-  for (const auto& entry : shared_)
+  for (const ObstacleIndex::Entry& entry : index_.entries())
   {
-    const CellRect& other = entry.second.rectangle_cells;
+    const CellRect& other = entry.rectangle_cells;
     const CellRect overlap{ std::max(rect.min_x, other.min_x), std::max(rect.min_y, other.min_y),
                             std::min(rect.max_x, other.max_x), std::min(rect.max_y, other.max_y) };
     if (!overlap.empty())
@@ -500,13 +463,14 @@ void FleetObstacles::draw(std::uint8_t* master, const GridGeometry& g, int min_i
   const std::uint32_t first = static_cast<std::uint32_t>(y0) * g.size_x;
   const std::uint32_t end = static_cast<std::uint32_t>(y1) * g.size_x;
   const bool whole_rows = x0 == 0 && x1 == static_cast<int>(g.size_x);
-  for (const auto& entry : shared_)
+  for (const ObstacleIndex::Entry& entry : index_.entries())
   {
-    const std::vector<std::uint32_t>& present = entry.second.cells.present();
-    if (present.empty() || present.back() < first || present.front() >= end)
+    // The entry's cell range first: most obstacles have no cell in the window's rows, and are not looked at.
+    if (entry.first > entry.last || entry.last < first || entry.first >= end)
     {
       continue;
     }
+    const std::vector<std::uint32_t>& present = entry.obstacle->cells.present();
     auto it = std::lower_bound(present.begin(), present.end(), first);
     const auto stop = std::lower_bound(it, present.end(), end);
     for (; it != stop; ++it)
@@ -550,12 +514,11 @@ void FleetObstacles::moveTo(const CellMover& mover, const GridGeometry& geometry
                             CellFlags& flags, MoveReport& report)
 {
   monitored_.assign(geometry.cellCount());  // marked below
-  flagged_cells_.clear();                     // flags is the new grid's: every present cell is flagged again
-  watch_flags_stale_ = true;
-  view_index_stale_ = true;
   dirty_ = WorldBounds::none();
+  std::vector<SharedObstacle*> all;
   for (auto& entry : shared_)
   {
+    all.push_back(&entry.second);
     SharedObstacle& obstacle = entry.second;
     report.shared_cells_dropped += obstacle.cells.remap(mover);
     std::unordered_map<std::uint32_t, FreeStreak> streaks;
@@ -577,6 +540,7 @@ void FleetObstacles::moveTo(const CellMover& mover, const GridGeometry& geometry
     report.obstacles_out_of_grid += obstacle.cells.presentCount() == 0;
     markDirty(obstacle.cells.present(), geometry);
   }
+  index_.rebuild(std::move(all));  // flags is the new grid's: every present cell is flagged again
 }
 
 }  // namespace sharing_layer

@@ -93,6 +93,41 @@ TEST(CostMerge, MaxAndOverwriteAreCostmap2dsRulesOnEveryCellOfRandomWindows)
   }
 }
 
+// Every pair of costs, 256 x 256 in one window (row m: the master's cost m beside each of the layer's 256), so that
+// the pairs go through the vector lanes that merge 16 cells at a time as well as the scalar rule.
+TEST(CostMerge, EveryPairOfCostsFollowsBothRulesInTheVectorLanes)
+{
+  Grid master(256 * 256), layer(256 * 256);
+  for (std::size_t m = 0; m < 256; ++m)
+  {
+    for (std::size_t l = 0; l < 256; ++l)
+    {
+      master[m * 256 + l] = static_cast<std::uint8_t>(m);
+      layer[m * 256 + l] = static_cast<std::uint8_t>(l);
+    }
+  }
+  const MergeWindow window{ 256, 0, 0, 256, 256 };
+  for (const bool overwrite : { false, true })
+  {
+    Grid expected = master, got = master;
+    if (overwrite)
+    {
+      referenceOverwrite(layer, expected, window);
+      mergeOverwrite(layer.data(), got.data(), window);
+    }
+    else
+    {
+      referenceMax(layer, expected, window);
+      mergeMax(layer.data(), got.data(), window);
+    }
+    for (std::size_t i = 0; i < got.size(); ++i)
+    {
+      ASSERT_EQ(expected[i], got[i]) << (overwrite ? "overwrite" : "max") << ": master " << i / 256 << ", layer "
+                                     << i % 256;
+    }
+  }
+}
+
 TEST(CostMerge, EveryPairOfCostsFollowsTheMaxRule)
 {
   for (int m = 0; m < 256; ++m)

@@ -148,6 +148,51 @@ TEST(FanClearing, TheReferenceScanIsFilledNearTheSensorAndEqualToRaytracing)
   EXPECT_LT(stats.near_cells, stats.grouped_beams * (kNearSteps + 1) / 3);
 }
 
+TEST(FanClearing, TheReferenceScanCutAtThreeMetresIsFilledThoughNoBeamReachesTheNearSteps)
+{
+  // raytrace_range 3 m: every beam is cut at 60 cells, before kNearSteps; the runs fill as far as their shortest beam.
+  const sharing_layer::bench::Scene scene = sharing_layer::bench::makeScene();
+  const sharing_layer::GridGeometry& g = scene.geometry;
+  Fan fan;
+  fan.size_x = g.size_x;
+  fan.size_y = g.size_y;
+  ASSERT_TRUE(g.worldToMap(scene.scan.origin.x, scene.scan.origin.y, fan.x0, fan.y0));
+  for (const sharing_layer::Point3& p : scene.scan.points)
+  {
+    unsigned int x1 = 0, y1 = 0;
+    ASSERT_TRUE(g.worldToMap(p.x, p.y, x1, y1));
+    fan.to(x1, y1, g.cellDistance(3.0));
+    ASSERT_LT(fan.lines.back().end, kNearSteps);
+  }
+  FanStats stats;
+  EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
+  EXPECT_GT(stats.grouped_beams, fan.lines.size() * 8 / 10);
+  EXPECT_LT(stats.near_cells, stats.grouped_beams * 60 / 6);
+}
+
+TEST(FanClearing, ABeamEndingCloseIsRaytracedAloneAndShrinkingBeamsStartRunsOfTheirOwn)
+{
+  // 60 beams close together along +x, 240 cells long but for: beam 10, which ends at step 20 (on something close),
+  // and beams 25 on, cut shorter and shorter, from 100 down to 32 cells (as raytrace_range cuts beams along an
+  // octant). The fill must not reach past any beam's end, nor miss a cell of the long ones.
+  Fan fan;
+  fan.size_x = fan.size_y = 400;
+  fan.x0 = fan.y0 = 100;
+  for (unsigned int i = 0; i < 60; ++i)
+  {
+    if (i == 10)
+    {
+      fan.to(120, 101);  // about the same direction, 20 steps
+      continue;
+    }
+    fan.to(340, 100 + i, i < 25 ? UINT_MAX : 100 - 2 * (i - 25));
+  }
+  FanStats stats;
+  EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
+  // The long beams in one run across beam 10, the shrinking ones below kNearSteps in one of their own.
+  EXPECT_EQ(2u, stats.groups);
+}
+
 TEST(FanClearing, EveryOctantAndTheAxesBetweenThem)
 {
   // 64 beams close together around each of the 16 directions k * 22.5 degrees (axes, diagonals and between),

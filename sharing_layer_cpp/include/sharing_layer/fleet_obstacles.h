@@ -12,6 +12,7 @@
 #include "sharing_layer/grid_frame.h"
 #include "sharing_layer/grid_geometry.h"
 #include "sharing_layer/layer_params.h"
+#include "sharing_layer/obstacle_index.h"
 #include "sharing_layer/observed_cells.h"
 #include "sharing_layer/shared_obstacle.h"
 #include "sharing_layer/subsection.h"
@@ -56,8 +57,8 @@ struct ScanEvidence
  * - leases: an observation (marked cells, any robot's) renews an obstacle; a scan that sees it again sends one
  *   when nobody did for lease_renewal_interval;
  * - expiry: the handler ends an obstacle (expire).
- * Owns the obstacles, their monitored rectangles (a bit per cell), the in-view index, the present cells' watch bit in
- * CellFlags and the bounds dirtied for the master grid.
+ * Owns the obstacles, their monitored rectangles (a bit per cell), their index (ObstacleIndex: the in-view test, the
+ * draw, the present cells' watch bit in CellFlags) and the bounds dirtied for the master grid.
  */
 class FleetObstacles
 {
@@ -113,8 +114,8 @@ private:
   /// @brief After an obstacle left: clears the bits over its rectangle but where another still covers it.
   void unmarkMonitored(const CellRect& rect, const GridGeometry& g);
   /// @brief The union of the rectangles: an obstacle's rectangle only grows (merging), here as in the handler, so
-  /// its monitoring covers every cell the fleet added to it.
-  void growRectangle(SharedObstacle& obstacle, const Subsection& rectangle, const GridGeometry& g,
+  /// its monitoring covers every cell the fleet added to it. @return whether it grew
+  bool growRectangle(SharedObstacle& obstacle, const Subsection& rectangle, const GridGeometry& g,
                      ObservedCells& observed, CellFlags& flags);
   /**
    * @brief Growing: steady shareable cells that touch the obstacle's present cells within cluster_gap, directly or
@@ -131,21 +132,10 @@ private:
   bool monitorOne(SharedObstacle& obstacle, ScanEvidence& evidence, double now_s, const LayerParams& params,
                   const GridGeometry& g, ObservedCells& observed, CellFlags& flags);
   void markDirty(const std::vector<std::uint32_t>& cells, const GridGeometry& g);
-  /// @brief Rebuilds view_index_ when obstacles came, went or grew.
-  void refreshViewIndex();
 
   std::map<std::string, SharedObstacle> shared_;
   BitGrid monitored_;  ///< a bit per cell (in tiles): a shared obstacle's rectangle covers it
-  /// The obstacles with cells on the grid and their rectangles, side by side: the in-view test of every scan.
-  struct ViewEntry
-  {
-    Subsection rectangle;
-    SharedObstacle* obstacle;
-  };
-  std::vector<ViewEntry> view_index_;
-  bool view_index_stale_ = true;
-  std::vector<std::uint32_t> flagged_cells_;  ///< cells flagged kFlaggedWatched
-  bool watch_flags_stale_ = true;             ///< present cells changed since refreshWatchFlags
+  ObstacleIndex index_;  ///< the obstacles side by side, and their present cells' watch flags
   WorldBounds dirty_ = WorldBounds::none();
   /// One obstacle's changes during monitor (kept so that a scan does not allocate them again).
   std::vector<std::uint32_t> marked_, cleared_, seen_again_;

@@ -110,6 +110,10 @@ struct SharedObstacle
   /// Per present cell: this robot's current streak of evidence of free space (local monitoring state,
   /// never sent).
   std::unordered_map<std::uint32_t, FreeStreak> free_streaks;
+  // Kept by ObstacleIndex:
+  std::size_t index_slot = 0;            ///< its entry in the index
+  std::vector<std::uint32_t> flagged;    ///< its present cells when their watch flags were last set (sorted)
+  bool watch_pending = false;            ///< its flags wait for the next refresh
 };
 
 }  // namespace sharing_layer

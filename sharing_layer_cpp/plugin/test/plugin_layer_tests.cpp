@@ -680,6 +680,7 @@ TEST(PluginLayer, DiagnosticsReportTheMapOnceReceivedAndCountObstaclesAndProposa
   EXPECT_TRUE(diagnostics.waitFor(name,
                                   [](const diagnostic_msgs::DiagnosticStatus& s) {
                                     return countOf(s, "shared obstacles held") == 1 &&
+                                           countOf(s, "fleet messages applied") == 1 &&
                                            countOf(s, "fleet messages rejected") >= 1 &&
                                            countOf(s, "proposals published") >= 1 &&
                                            contains(valueOf(s, "last rejection"), "bad-one");
