@@ -2,6 +2,7 @@
 layouts' goals files: crossing a blocked corridor's mouth, the seeded dispatch, obstacles after
 merging and which were robots or walls, and the broker's $SYS byte accounting."""
 import importlib.machinery
+import json
 import math
 import importlib.util
 import os
@@ -279,3 +280,27 @@ def test_the_on_off_interval_is_students_t_over_the_seeds_and_none_for_one_seed(
     mean, low, high = bf.ratio_interval([0.8])
     assert mean == 0.8 and math.isnan(low) and math.isnan(high)
     assert math.isnan(bf.ratio_interval([float("nan")])[0])
+
+
+def test_layout_all_writes_one_table_per_layout_and_summarize_reads_them_back(tmp_path, capsys):
+    bf = load_bench_fleet()
+    assert bf.per_layout_path("/o/fleet.md", "deadend", True) == "/o/fleet_deadend.md"
+    assert bf.per_layout_path("/o/fleet.md", "deadend", False) == "/o/fleet.md"
+    assert bf.per_layout_path(None, "deadend", True) is None
+    fields = {"recoveries": 0, "stuck": 0, "entered_blocked_corridor": 0, "reached": 2, "time_p95": 1.0,
+              "distance_m": 1.0, "latency_ms_p50": 1.0, "latency_ms_p99": 1.0, "latency_ms": [1.0]}
+    for layout, on, off in (("facility", 50.0, 100.0), ("corridors", 90.0, 100.0)):
+        for sharing, t in ((True, on), (False, off)):
+            row = dict(fields, time_to_goal={"robot_0": t, "robot_1": t}, time_mean=t)
+            with open(str(tmp_path / ("%s_n2_s1_%s.json" % (layout, "on" if sharing else "off"))), "w") as f:
+                json.dump(row, f)
+    (tmp_path / "notes_n2.json").write_text("{}")                  # not a run: ignored
+    args = bf.make_parser().parse_args(["--summarize", str(tmp_path), "--table", str(tmp_path / "fleet.md")])
+    assert bf.summarize(None, args) == 0
+    facility = (tmp_path / "fleet_facility.md").read_text()
+    corridors = (tmp_path / "fleet_corridors.md").read_text()
+    assert "| 2 | 1 | 50.0 ± 0.0 | 100.0 ± 0.0 | 0.50 |" in facility, facility
+    assert "| 2 | 1 | 90.0 ± 0.0 | 100.0 ± 0.0 | 0.90 |" in corridors, corridors
+    assert "layout facility" in facility and "layout corridors" in corridors
+    out = capsys.readouterr().out
+    assert out.index("## facility world") < out.index("## corridors world")

@@ -108,7 +108,7 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--layout", "nowhere"], "--layout must be one of facility, deadend, corridors, got 'nowhere'"),
+    (["--layout", "nowhere"], "--layout must be one of facility, deadend, corridors or all, got 'nowhere'"),
     (["--robots", "11"], "robots must be 1..10"),
     (["--seed", "x"], "invalid int value: 'x'"),
     (["--obstacle-duration", "0"], "--obstacle-duration must be at least 1 s"),
