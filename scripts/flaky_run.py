@@ -9,7 +9,10 @@ last. Each run is judged by its outcome only (rostest's exit code and its JUnit 
 how long it took; the reasons are the failing assertions' messages.
 
 Usage: flaky_run.py [--repeat N] [--load K] [--results DIR] TEST...
+       flaky_run.py --demo [--repeat N] [--load K] [--results DIR] [DEMO OPTION...]
   TEST is what rostest takes: a path (fleet_nav/test/nav/nav_willow.test) or PKG FILE.
+  --demo runs `make demo`'s program (scripts/run_demo.py, its options after --demo's) instead, each run
+  writing its report to DIR/run_<i>; a run passes when it exits 0 and its report lists no failed check.
   Prints one line per run and ends with "k of N passed"; exit 0 only when every run passed.
   Results of run i are kept in DIR/run_<i> (default test_results/flaky/<test name>/run_<i>), and
   DIR/summary.json holds the runs (outcome, reasons, exit code, load average before and after).
@@ -100,6 +103,23 @@ def judge_folder(returncode, folder):
     return judge(returncode, test_cases, summary_cases)
 
 
+def judge_demo(returncode, folder):
+    """(passed, reasons) of one run of scripts/run_demo.py that wrote its report to ``folder``: it exited 0,
+    its report.md exists and lists no failed check."""
+    reasons = [] if returncode == 0 else ["run_demo exited %d" % returncode]
+    report = os.path.join(folder, "report.md")
+    try:
+        with open(report) as f:
+            text = f.read()
+    except OSError as err:
+        return False, reasons + ["no report: %s" % err]
+    if "Checks that failed" in text:
+        failed = text.split("Checks that failed", 1)[1].strip().splitlines()
+        reasons += ["report: " + line.lstrip("- ").strip() for line in failed[:5] if line.strip().startswith("-")] \
+            or ["report lists failed checks"]
+    return not reasons, reasons
+
+
 def summary_line(runs):
     """'k of N passed' and, after it, the loads seen (1-minute load average at the runs' starts and ends)."""
     passed = sum(1 for r in runs if r["passed"])
@@ -157,15 +177,20 @@ def main(argv=None):
     parser.add_argument("--repeat", type=int, default=10, help="runs (default 10)")
     parser.add_argument("--load", type=int, default=2, help="busy processes beside the runs (default 2; 0 = none)")
     parser.add_argument("--results", help="folder for the runs' results (default test_results/flaky/<test>)")
-    parser.add_argument("test", nargs="+", help="rostest's arguments: a .test path, or PKG FILE")
+    parser.add_argument("--demo", action="store_true",
+                        help="run scripts/run_demo.py (make demo) instead of a rostest; TEST... are its options")
+    parser.add_argument("test", nargs="*", help="rostest's arguments: a .test path, or PKG FILE")
     args = parser.parse_args(argv)
     if args.repeat < 1 or args.load < 0:
         parser.error("--repeat must be >= 1 and --load >= 0")
-    out = args.results or os.path.join(RESULTS, test_name(args.test))
+    if not args.demo and not args.test:
+        parser.error("name a rostest (a .test path, or PKG FILE), or give --demo")
+    what = "demo" if args.demo else "rostest"
+    out = args.results or os.path.join(RESULTS, "demo" if args.demo else test_name(args.test))
     os.makedirs(out, exist_ok=True)
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-    print("flaky_run: rostest %s, %d runs beside %d busy processes, %d cores, commit %s, %s"
-          % (" ".join(args.test), args.repeat, args.load, os.cpu_count() or 0, commit(), started), flush=True)
+    print("flaky_run: %s %s, %d runs beside %d busy processes, %d cores, commit %s, %s"
+          % (what, " ".join(args.test), args.repeat, args.load, os.cpu_count() or 0, commit(), started), flush=True)
     runs = []
     load = start_load(args.load)
     try:
@@ -173,10 +198,11 @@ def main(argv=None):
             folder = os.path.join(out, "run_%d" % i)
             subprocess.run(["rm", "-rf", folder], check=False)  # a stale result must not count as this run's
             before, t0 = os.getloadavg()[0], time.monotonic()
+            command = [sys.executable, os.path.join(ROOT, "scripts", "run_demo.py"), "--out", folder] + args.test \
+                if args.demo else ["rostest", "--results-base-dir", folder] + args.test
             with open(folder + ".log", "w") as log:
-                proc = subprocess.run(["rostest", "--results-base-dir", folder] + args.test, cwd=ROOT,
-                                      stdout=log, stderr=subprocess.STDOUT)
-            passed, reasons = judge_folder(proc.returncode, folder)
+                proc = subprocess.run(command, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+            passed, reasons = (judge_demo if args.demo else judge_folder)(proc.returncode, folder)
             run = {"index": i, "passed": passed, "reasons": reasons, "returncode": proc.returncode,
                    "wall_s": round(time.monotonic() - t0, 1), "load_before": before,
                    "load_after": os.getloadavg()[0], "log": folder + ".log"}
@@ -185,7 +211,7 @@ def main(argv=None):
     finally:
         stop_load(load)
     with open(os.path.join(out, "summary.json"), "w") as f:
-        json.dump({"test": args.test, "load_processes": args.load, "commit": commit(), "started": started,
+        json.dump({"test": ["demo"] + args.test if args.demo else args.test, "load_processes": args.load, "commit": commit(), "started": started,
                    "runs": runs}, f, indent=1)
     print(summary_line(runs), flush=True)
     return 0 if all(r["passed"] for r in runs) else 1

@@ -1,6 +1,7 @@
 """The flakiness runner (scripts/flaky_run.py) counts runs by their outcome and names each failure's
 reason: nav_willow.test failed on a loaded machine in a clean-clone `make test`, and "10 of 10 under
 load" has to be counted the same way each time (issue 28). No timing is asserted here."""
+import pytest
 import importlib.util
 import json
 import os
@@ -159,3 +160,24 @@ def test_bad_counts_are_refused(capsys):
     with pytest.raises(SystemExit):
         flaky.main(["--repeat", "0", "x.test"])
     assert "--repeat must be >= 1" in capsys.readouterr().err
+
+
+def test_a_demo_run_passes_on_exit_0_with_a_report_without_failed_checks(tmp_path):
+    (tmp_path / "report.md").write_text("# Fleet demo\n\nall figures\n")
+    assert flaky.judge_demo(0, str(tmp_path)) == (True, [])
+
+
+def test_a_demo_run_fails_on_its_reports_failed_checks_its_exit_or_no_report(tmp_path):
+    (tmp_path / "report.md").write_text("# Fleet demo\n\n## Checks that failed\n\n- robot_2 missing from the "
+                                        "comparison\n- paths.png is empty\n")
+    passed, reasons = flaky.judge_demo(1, str(tmp_path))
+    assert not passed
+    assert reasons == ["run_demo exited 1", "report: robot_2 missing from the comparison", "report: paths.png is empty"]
+    passed, reasons = flaky.judge_demo(0, str(tmp_path / "nowhere"))
+    assert not passed and reasons[0].startswith("no report: ")
+
+
+def test_flaky_run_needs_a_rostest_or_demo(capsys):
+    with pytest.raises(SystemExit):
+        flaky.main(["--repeat", "1"])
+    assert "name a rostest" in capsys.readouterr().err
