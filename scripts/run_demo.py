@@ -16,7 +16,8 @@ settings, cannot turn a robot round when its plan reverses at the block (one rob
 The run checks itself and exits 1, listing what failed under "Checks that failed" in the report, when: a run
 gave no result; a robot is missing from the comparison; a picture is missing or empty; a figure prints as a
 non-number; or a run's output has an ERROR/FATAL line or a traceback (the launch logs are kept in out/logs;
-the tf-lag errors upstream base_local_planner prints on a loaded machine are listed in KNOWN_UPSTREAM and
+the tf-lag errors upstream base_local_planner prints on a loaded machine, and move_base giving up on a goal,
+are listed in KNOWN_UPSTREAM and
 counted in the report instead).
 
 Usage: scripts/run_demo.py [--layout facility] [--robots 3] [--seed 1] [--interval 20] [--speedup 1] [--out out]
@@ -45,6 +46,10 @@ KNOWN_UPSTREAM = [
                 r"transform from frame \[robot_\d+/odom\] to frame \[map\]"), "base_local_planner, tf lag of one step"),
     (re.compile(r"\[ERROR\] \[[\d.]+, [\d.]+\]: Global Frame: robot_\d+/odom Plan Frame size \d+: map"),
      "base_local_planner, the second line of the same message"),
+    # move_base giving up on a goal is an outcome the comparison shows (the robot is not counted as arrived, and
+    # its path ends where it stopped), mostly in the run without sharing, where robots meet the blocks.
+    (re.compile(r"\[ERROR\] \[[\d.]+, [\d.]+\]: Aborting because a valid control could not be found\. Even after "
+                r"executing all recovery behaviors"), "move_base gave up on a goal (shown in the comparison)"),
 ]
 
 

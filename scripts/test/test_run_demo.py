@@ -74,3 +74,12 @@ def test_an_error_line_of_ours_or_a_traceback_fails_the_run(tmp_path):
     # an upstream line changed in any part is not exempt
     other = UPSTREAM_LAG.replace("robot_0/odom] to frame [map]", "robot_0/odom] to frame [robot_0/base_link]")
     assert checks(tmp_path, logs=other)
+
+
+def test_move_base_giving_up_is_counted_as_upstreams_not_failed_on(tmp_path):
+    abort = ("\x1b[31m[ERROR] [1795916543.067729142, 58.300000000]: Aborting because a valid control could not be "
+             "found. Even after executing all recovery behaviors\x1b[0m\n")
+    assert demo.error_lines(abort) == []
+    assert demo.upstream_lines(abort) == {"move_base gave up on a goal (shown in the comparison)": 1}
+    ours = "[ERROR] [1795916477.316450, 99.100000]: robot_0: could not withdraw the footprint of robot_2\n"
+    assert demo.error_lines(abort + ours) == [ours.strip()]
