@@ -60,7 +60,7 @@ def test_attack_4_a_few_bytes_declaring_a_million_cells_are_not_expanded(fleet, 
 
 
 def test_the_bridge_cell_cap_is_the_handlers_rule():
-    from sharing_handler_py.authority import PeerPolicy
+    from sharing_msgs.authority import PeerPolicy
     from coaty_bridge.client import BridgeConfig
     limits = BridgeConfig("robot_0").limits
     assert limits.obstacle_cell_cap(0.05) == PeerPolicy(10.0, 60).cell_cap(GRID) == 202 * 202

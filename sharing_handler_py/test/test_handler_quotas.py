@@ -4,7 +4,7 @@ source, and the robot itself, goes on as before. Pure; no wall clock (a fake clo
 import logging
 
 from handler_fixtures import U, GRID, Recorder, proposal, rect, update
-from sharing_handler_py import quotas
+from sharing_msgs.authority import quotas
 
 
 def far(k, source="robot_9", version=1, stamp=100.0, uuid=None):

@@ -27,8 +27,7 @@ from coaty_bridge.errors import (CoatyError, InvalidJsonError, InvalidPayloadErr
 from coaty_bridge.topics import check_uuid, _UUID_RE
 from coaty_bridge.errors import InvalidNameError, ObstacleCellsError, ObstacleExtentError
 from sharing_msgs import obstacle_rules
-from sharing_handler_py.authority import PeerPolicy
-from sharing_handler_py.errors import InvalidMessageError
+from sharing_msgs.authority import AuthorityError, PeerPolicy
 
 IDENTITY_OBJECT_TYPE = "coaty.Identity"
 IDENTITY_CORE_TYPE = "Identity"
@@ -59,7 +58,7 @@ class CodecLimits:
     """Bounds applied to everything that arrives."""
     max_payload_bytes: int = 1024 * 1024
     max_indexes: int = 1_000_000
-    # The handler's caps (sharing_handler_py.authority.PeerPolicy, the same rules): checked
+    # The handler's caps (sharing_msgs.authority.PeerPolicy, the same rules): checked
     # here before the index sets are expanded (issue 27, attack 4).
     max_obstacle_extent: float = 10.0   # m, longest side of the rectangle
     max_obstacle_cells: int = 0         # 0 = the cells of a max_obstacle_extent square (+1 cell a side)
@@ -304,7 +303,7 @@ def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimit
     # declare 10^6 cells; the handler would drop the obstacle, so do not build it at all.
     try:
         limits.policy.check_extent(_Rectangle(*rectangle), "rectangle of obstacle %s" % uuid)
-    except InvalidMessageError as err:
+    except AuthorityError as err:
         raise ObstacleExtentError(str(err)) from None
     cell_cap = limits.obstacle_cell_cap(resolution)
     marked = _indexes(obj, "markedIndexes", cells, limits.max_indexes, cell_cap)

@@ -37,7 +37,7 @@ depend on the order: a later mark (a newer stamp: the block is back) shows it ag
 and an older one stays cleared. The lease (obstacle_duration after the last observation) only
 bounds what nobody checks.
 
-Bounded authority (issue 27, authority.py): no peer can make an obstacle larger, longer-lived
+Bounded authority (issue 27, sharing_msgs.authority): no peer can make an obstacle larger, longer-lived
 or newer than this handler's own caps. A deadline is cut to obstacle_duration on arrival (so a
 renewal reaches at most arrival + obstacle_duration), a message that does not mark cells can
 only bring the expiry closer (the earlier expiry is kept), a message beyond the extent, cell or
@@ -47,16 +47,16 @@ import heapq
 import logging
 import math
 import uuid as uuidlib
-from dataclasses import dataclass
-from typing import Tuple
 
-from sharing_handler_py.authority import PeerPolicy
-from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
+from sharing_handler_py.entry import Entry, HeldObstacle, remaining_deadline  # noqa: F401 (re-exported)
+from sharing_handler_py.errors import REFUSED, InvalidMessageError
+from sharing_handler_py.manual import ManualMixin
+from sharing_handler_py.merging import MergingMixin
 from sharing_handler_py.nearby import RectangleIndex
-from sharing_handler_py.quotas import DropReport, SourceQuotas
-from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
-                                           check_indexes, check_message_values, check_uuid)
+from sharing_handler_py.validation import Geometry, check_fleet_message, check_message_values, check_uuid, \
+    check_indexes
 from sharing_msgs import obstacle_rules
+from sharing_msgs.authority import DropReport, PeerPolicy, SourceQuotas
 
 _log = logging.getLogger(__name__)
 
@@ -79,13 +79,13 @@ DROP_REASONS = (
     "bad_stamp",            # a header stamp outside the ROS time range (or not finite)
     "rectangle_outside_grid",  # a rectangle reaching beyond the grid it names
     "empty_update",         # a fleet message without any marked or cleared cell
-    # issue 27, bounded authority (authority.py)
+    # issue 27, bounded authority (sharing_msgs.authority.policy)
     "oversized_rectangle",  # a rectangle (own updates: the grown union) beyond max_obstacle_extent
     "too_many_obstacle_cells",  # a message with more cells than one obstacle may hold
     "implausible_version",  # more than max_version_step beyond the highest version seen
     "stale_stamp",          # stamped longer ago than obstacle_duration + max_clock_skew
     "future_stamp",         # stamped more than max_clock_skew ahead of our clock
-    # issue 27, per-source quotas (quotas.py): counted per source too, logged once per 10 s
+    # issue 27, per-source quotas (sharing_msgs.authority.quotas): counted per source too, logged once per 10 s
     "source_quota",         # a new obstacle from a source already holding max_obstacles_per_source here
     "source_rate",          # beyond the source's token bucket (source_update_rate, source_update_burst)
 )
@@ -97,183 +97,11 @@ EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_ou
                   "capped_deadlines",  # a peer's deadline cut to obstacle_duration
                   "merges_refused")    # two obstacles left apart: their union exceeds the caps
 
-
-@dataclass(frozen=True)
-class HeldObstacle:
-    """An obstacle as a handler holds it (one entry of the debug list)."""
-
-    uuid: str
-    source: str            # the robot that first shared it
-    version: int           # the greatest version seen
-    deadline: int          # seconds, as in the message that defines the metadata (first share)
-    rectangle: Rectangle   # union of every rectangle seen for it (and for obstacles it absorbed)
-    geometry: Geometry
-    frame_id: str
-    cells: Tuple[int, ...]  # present cells, sorted
-    arrival: float         # local arrival time (clock seconds)
-    remaining: float       # seconds left at the time of the listing (expiry - now)
-
-    def to_obstacle(self):
-        """Full-state message: cells marked, nothing cleared, deadline = remaining seconds
-        rounded down (at least 1), so a copy made from it never outlives this one by more
-        than a second."""
-        return Obstacle(uuid=self.uuid, marked=self.cells, cleared=(),
-                        deadline=remaining_deadline(self.remaining), rectangle=self.rectangle,
-                        source=self.source, geometry=self.geometry, version=self.version,
-                        frame_id=self.frame_id)
-
-
-def _meets(a, b):
-    """Whether two rectangles overlap or touch."""
-    return a.min_x <= b.max_x and b.min_x <= a.max_x and a.min_y <= b.max_y and b.min_y <= a.max_y
-
-
-def remaining_deadline(remaining):
-    """Seconds left -> the deadline a message carries: whole seconds rounded down (a copy must
-    not outlive the original), at least 1 (0 would be refused as expiring on arrival)."""
-    if not math.isfinite(remaining):
-        return 1
-    return int(min(obstacle_rules.MAX_UINT32, max(1, math.floor(remaining))))
-
-
-def _meta_key(obstacle):
-    """Orders the messages of one uuid to pick the one that defines the metadata: the smallest
-    stamp (version, source), then the smallest metadata for exact stamp ties."""
-    return (obstacle.version, obstacle.source, tuple(obstacle.rectangle.as_list()),
-            obstacle.deadline, obstacle.frame_id)
-
-
-class _Entry:
-    """Mutable state of one held obstacle."""
-
-    __slots__ = ("uuid", "source", "owner", "rectangle", "deadline", "geometry", "frame_id", "arrival",
-                 "_expires", "_heap", "first_key", "max_version", "stamps", "present", "sorted_cells")
-
-    def __init__(self, obstacle, arrival, heap=None):
-        self.uuid = obstacle.uuid
-        self.source = obstacle.source
-        self.owner = obstacle.source   # the source whose message made it here: its quota is charged
-        self.rectangle = obstacle.rectangle
-        self.deadline = obstacle.deadline
-        self.geometry = obstacle.geometry
-        self.frame_id = obstacle.frame_id
-        self.arrival = arrival
-        # Local expiry, a lease. Deadlines on the wire are remaining lifetimes aged to the moment
-        # of sending: a renewal carries a full obstacle_duration, anything else what is left,
-        # rounded down. The greatest arrival + deadline wins (see note_deadline).
-        # Every value it takes goes into the handler's deadline heap, so expiry need not look at
-        # every obstacle (items of values since replaced are skipped there).
-        self._heap = [] if heap is None else heap
-        self._expires = None
-        self.expires_at = arrival + obstacle.deadline
-        self.first_key = _meta_key(obstacle)
-        self.max_version = obstacle.version
-        self.stamps = {}          # cell -> (version, source) of the update that last set it
-        self.present = set()      # cells currently marked
-        self.sorted_cells = ()    # cache of sorted(present); None when stale
-
-    @property
-    def expires_at(self):
-        return self._expires
-
-    @expires_at.setter
-    def expires_at(self, value):
-        if value != self._expires:
-            self._expires = value
-            heapq.heappush(self._heap, (value, self.uuid))
-
-    def apply(self, obstacle):
-        """Applies one update by the stamp rule; returns True when anything visible changed."""
-        stamp = obstacle.stamp_key
-        stamps, present = self.stamps, self.present
-        get = stamps.get
-        before = len(present)
-        for cell in obstacle.marked:
-            old = get(cell)
-            if old is None or stamp > old:
-                stamps[cell] = stamp
-                present.add(cell)
-        changed = len(present) != before
-        for cell in obstacle.cleared:
-            old = get(cell)
-            if old is None or stamp >= old:
-                stamps[cell] = stamp
-                if cell in present:
-                    present.discard(cell)
-                    changed = True
-        if obstacle.version > self.max_version:
-            self.max_version = obstacle.version
-            changed = True
-        changed |= self._grow(obstacle.rectangle)
-        changed |= self._take_metadata(_meta_key(obstacle), obstacle.source, obstacle.deadline,
-                                       obstacle.frame_id)
-        if changed:
-            self.sorted_cells = None
-        return changed
-
-    def absorb(self, other):
-        """Joins another obstacle into this one (merging): per cell the greater (stamp, absent)
-        wins, which is what applying every update of both to this uuid gives; the greatest
-        version and lease, the union of the rectangles, the metadata of the earlier first share."""
-        stamps, present = self.stamps, self.present
-        for cell, stamp in other.stamps.items():
-            old = stamps.get(cell)
-            theirs = (stamp, cell not in other.present)
-            if old is None or theirs > (old, cell not in present):
-                stamps[cell] = stamp
-                if theirs[1]:
-                    present.discard(cell)
-                else:
-                    present.add(cell)
-        self.max_version = max(self.max_version, other.max_version)
-        self.expires_at = max(self.expires_at, other.expires_at)
-        self.arrival = min(self.arrival, other.arrival)
-        self._grow(other.rectangle)
-        self._take_metadata(other.first_key, other.source, other.deadline, other.frame_id)
-        self.sorted_cells = None
-
-    def _grow(self, rectangle):
-        if self.rectangle.contains(rectangle):
-            return False
-        self.rectangle = self.rectangle.union(rectangle)
-        return True
-
-    def _take_metadata(self, key, source, deadline, frame_id):
-        # The earliest share defines the metadata, so all robots agree on it; two messages
-        # with the same stamp (only a faulty peer sends them) are ordered by their metadata.
-        if key[:2] <= self.first_key[:2] and key < self.first_key:
-            self.first_key = key
-            self.source = source
-            self.deadline = deadline
-            self.frame_id = frame_id
-            return True
-        return False
-
-    def note_deadline(self, now, deadline):
-        """An observation of this obstacle (a message marking cells) arrived at `now` saying
-        `deadline` s remain (already capped by the policy): the greater lease wins."""
-        self.expires_at = max(self.expires_at, now + deadline)
-
-    def note_lease(self, now, deadline, observed):
-        """A fleet message arrived at `now` with `deadline` s left (capped by the policy). Only an
-        observation renews; anything else keeps the earlier expiry, so a peer's clear or stale
-        copy can never push the lease back."""
-        if observed:
-            self.note_deadline(now, deadline)
-        else:
-            self.expires_at = min(self.expires_at, now + deadline)
-
-    def cells(self):
-        if self.sorted_cells is None:
-            self.sorted_cells = tuple(sorted(self.present))
-        return self.sorted_cells
-
-
 def _noop(*_args):
     pass
 
 
-class SharingHandler:
+class SharingHandler(MergingMixin, ManualMixin):
     """Decides which proposals become fleet obstacles, which updates go out, what expires.
 
     Not thread-safe: call it from one thread (the node holds a lock around every call).
@@ -295,7 +123,7 @@ class SharingHandler:
             one obstacle (issue 12, merging). A robot needs at least twice its inscribed radius
             to pass between two obstacles, so a smaller gap is no passage anyway.
         max_obstacle_extent, max_obstacle_cells, max_version_step, max_clock_skew: the caps of
-            every message and merge (authority.PeerPolicy); max_clock_skew None = stamps are
+            every message and merge (sharing_msgs.authority.PeerPolicy); max_clock_skew None = stamps are
             not compared with the clock.
     """
 
@@ -422,7 +250,7 @@ class SharingHandler:
             # the layer's topic is open to any ROS node: the same caps as for a peer
             self._policy.check_extent(obstacle.rectangle, "proposal rectangle")
             self._policy.check_cells(len(obstacle.marked), self._geometry, "proposal")
-        except InvalidMessageError as err:
+        except REFUSED as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
         near = self._near(obstacle.rectangle, len(obstacle.marked))
@@ -457,7 +285,7 @@ class SharingHandler:
             # what goes out must pass every peer's caps; the own obstacle grows by union
             self._policy.check_extent(entry.rectangle.union(obstacle.rectangle), "grown rectangle")
             self._policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "update")
-        except InvalidMessageError as err:
+        except REFUSED as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
         changes = {}
@@ -493,7 +321,7 @@ class SharingHandler:
         try:
             # What goes out must pass the fleet check on every receiver (the same rules).
             check_fleet_message(obstacle)
-        except InvalidMessageError as err:
+        except REFUSED as err:
             self.reject(self.robot_name, obstacle.uuid, err)
             return None
         self._to_fleet(obstacle)
@@ -532,7 +360,7 @@ class SharingHandler:
             self._check_authority(obstacle, entry)
             if entry is None and not self._quotas.allow_new(obstacle.source):
                 return self._quota_drop(obstacle, "source_quota", now)
-        except InvalidMessageError as err:
+        except REFUSED as err:
             self.reject(obstacle.source, obstacle.uuid, err)
             return False
         if obstacle.deadline > self._policy.max_lifetime:
@@ -543,7 +371,7 @@ class SharingHandler:
             obstacle = obstacle.replace(deadline=self._policy.cap_deadline(obstacle.deadline))
         shown = entry is not None and bool(entry.present)
         if entry is None:
-            entry = _Entry(obstacle, self._clock(), self._deadlines)
+            entry = Entry(obstacle, self._clock(), self._deadlines)
             self._entries[obstacle.uuid] = entry
             self._quotas.added(entry.owner)
             entry.apply(obstacle)
@@ -568,91 +396,6 @@ class SharingHandler:
         if len(self._deadlines) > 4 * len(self._entries) + 1024:
             self._compact_deadlines()   # renewals leave stale items; amortised O(1) per update
         return True
-
-    def add_manual(self, rectangle, marked=(), deadline=0, frame_id=""):
-        """Adds an obstacle by hand and shares it like a detected one. `rectangle` is a Rectangle
-        or [min_x, min_y, max_x, max_y]; without `marked`, every cell whose centre lies in the
-        rectangle is marked; deadline 0 = obstacle_duration. Returns the authorised Obstacle;
-        raises InvalidRequestError saying why not."""
-        if self._geometry is None:
-            raise InvalidRequestError("no map grid known yet: cannot turn a rectangle into cells")
-        try:
-            if not isinstance(rectangle, Rectangle):
-                rectangle = Rectangle.from_sequence(rectangle)
-            if isinstance(deadline, bool) or not isinstance(deadline, int) \
-                    or not 0 <= deadline <= obstacle_rules.MAX_UINT32:
-                raise InvalidRequestError("deadline %r is not 0..%d s" % (deadline, obstacle_rules.MAX_UINT32))
-            obstacle = Obstacle(uuid="", marked=(), cleared=(), deadline=0, rectangle=rectangle,
-                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id,
-                                stamp=self._clock())
-            check_message_values(obstacle)  # the rectangle lies on the grid, the stamp is ROS time
-            width, height = rectangle.max_x - rectangle.min_x, rectangle.max_y - rectangle.min_y
-            if max(width, height) > self._max_extent:
-                # An obstacle blocks a pathway; a huge rectangle would make every later
-                # proposal under it redundant on every robot.
-                raise InvalidRequestError("rectangle %s is %g m x %g m, larger than max_obstacle_extent "
-                                          "%g m" % (rectangle, width, height, self._max_extent))
-            marked = tuple(int(c) for c in marked) or self._geometry.cells_in(rectangle)
-            if not marked:
-                raise InvalidRequestError("rectangle %s covers no cell of the map (%s)"
-                                          % (rectangle, self._geometry))
-            obstacle = obstacle.replace(marked=marked)
-            check_message_values(obstacle)
-            check_indexes(obstacle, self._geometry, self._max_cells)
-            self._policy.check_cells(len(marked), self._geometry, "rectangle %s" % rectangle)
-        except InvalidMessageError as err:
-            raise InvalidRequestError(str(err)) from err
-        self._counters["manual"] += 1
-        near = self._near(rectangle, len(marked))
-        if near is None:
-            return self._authorise(obstacle, int(deadline) or self._deadline)
-        update = self._merge_proposal(obstacle, near)
-        if update is None:
-            # the update it would become was refused (and counted): say so, never return None
-            raise InvalidRequestError("rectangle %s lies within merge_distance of obstacle %s, and the "
-                                      "update of it was refused (see the log)" % (rectangle, near.uuid))
-        return update
-
-    def remove(self, uuid=None, rectangle=None, requested_by=""):
-        """Removes obstacles fleet-wide by hand: `uuid`, or every listed obstacle whose rectangle meets
-        `rectangle` (a Rectangle or [min_x, min_y, max_x, max_y]). Each goes out as this robot's update
-        clearing every present cell (as if seen free), to the fleet and to the layer, so every robot drops
-        it (issue 26's rule, issue 28's service). Returns the uuids removed; raises InvalidRequestError
-        saying why nothing could be."""
-        if not requested_by or not str(requested_by).strip():
-            raise InvalidRequestError("say who asks (requested_by): a removal is logged with its requester")
-        if uuid:
-            uuid = self.resolve(uuid)
-            entry = self._entries.get(uuid)
-            if entry is None or not entry.present:
-                raise InvalidRequestError("no obstacle %s is listed here" % uuid)
-            targets = [entry]
-        else:
-            try:
-                if not isinstance(rectangle, Rectangle):
-                    rectangle = Rectangle.from_sequence(rectangle)
-            except (InvalidMessageError, TypeError, ValueError) as err:
-                raise InvalidRequestError("give a uuid or a rectangle [min_x, min_y, max_x, max_y]: %s" % err) \
-                    from None
-            targets = [e for _u, e in sorted(self._entries.items()) if e.present and _meets(e.rectangle, rectangle)]
-            if not targets:
-                raise InvalidRequestError("no listed obstacle meets %s" % (rectangle,))
-        removed = []
-        for entry in targets:
-            clear = Obstacle(uuid=entry.uuid, marked=(), cleared=tuple(sorted(entry.present)),
-                             deadline=remaining_deadline(entry.expires_at - self._clock()),
-                             rectangle=entry.rectangle, source=self.robot_name, geometry=entry.geometry,
-                             version=entry.max_version + 1, frame_id=entry.frame_id, stamp=self._clock())
-            _log.info("%s: obstacle %s (from %s, %d cells) removed by hand, requested by %s", self.robot_name,
-                      entry.uuid, entry.source, len(entry.present), str(requested_by)[:80])
-            self._to_fleet(clear)
-            self._counters["updates_out"] += 1
-            self._to_layer(clear)
-            entry.apply(clear)
-            self._note_shown(entry, True, clear)  # (only listed obstacles are targets)
-            removed.append(entry.uuid)
-        self._on_change()
-        return removed
 
     def expire(self):
         """Removes every obstacle whose deadline has passed since its local arrival (no message
@@ -751,7 +494,7 @@ class SharingHandler:
         # stamp = when the share was made: the layer's detection time, or now (manual adds).
         shared = obstacle.replace(uuid=self._new_uuid(), version=1, source=self.robot_name,
                                   deadline=deadline, stamp=obstacle.stamp or self._clock())
-        entry = _Entry(shared, self._clock(), self._deadlines)
+        entry = Entry(shared, self._clock(), self._deadlines)
         self._entries[shared.uuid] = entry
         self._quotas.added(entry.owner)
         entry.apply(shared)
@@ -763,115 +506,6 @@ class SharingHandler:
         self._to_fleet(shared)
         self._on_change()
         return shared
-
-    def _near(self, rectangle, cells):
-        """The held obstacle (smallest uuid) whose rectangle overlaps `rectangle` or lies within
-        merge_distance of it and that stays within the caps with `cells` more, or None."""
-        near = sorted(u for u in self._nearby.near(rectangle, self._merge_distance)
-                      if self._mergeable(self._entries[u].rectangle, rectangle))
-        for uuid in near:
-            entry = self._entries[uuid]
-            if self._policy.fits(entry.rectangle.union(rectangle), len(entry.present) + cells, entry.geometry):
-                return entry
-        return None
-
-    def _mergeable(self, a, b):
-        """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the
-        gap between overlapping ones is 0."""
-        return a.gap(b) <= self._merge_distance
-
-    def _merge_proposal(self, proposal, entry):
-        """A proposal near a live obstacle is an observation of it: an update (marked cells, the
-        grown rectangle, a renewed lease) sent to the fleet and to our layer, which does not
-        know its proposal became an update."""
-        rectangle = entry.rectangle.union(proposal.rectangle)
-        update = proposal.replace(uuid=entry.uuid, version=entry.max_version + 1, source=self.robot_name,
-                                  deadline=self._deadline, rectangle=rectangle, cleared=(),
-                                  stamp=proposal.stamp or self._clock())
-        try:
-            check_fleet_message(update)
-        except InvalidMessageError as err:
-            self.reject(self.robot_name, entry.uuid, err)
-            return None
-        self._counters["merged_proposals"] += 1
-        self._counters["renewals"] += 1
-        _log.info("%s: proposal %s (%d cells) lies within merge_distance %g m of obstacle %s %s: "
-                  "sent as update v%d of it, rectangle now %s", self.robot_name, proposal.rectangle,
-                  len(proposal.marked), self._merge_distance, entry.uuid, entry.rectangle,
-                  update.version, rectangle)
-        entry.apply(update)
-        entry.note_deadline(self._clock(), self._deadline)
-        self._to_layer(update)
-        self._to_fleet(update)
-        self._counters["updates_out"] += 1
-        self._on_change()
-        self._merge_around(entry.uuid)
-        return update
-
-    def _merge_around(self, uuid):
-        """Restores the invariant "no two held obstacles lie within merge_distance, unless their
-        union exceeds the caps" after the rectangle of `uuid` grew or it was added: the smaller
-        uuid absorbs the other, until nothing near is left (an absorbed rectangle can reach a
-        third obstacle)."""
-        refused = set()  # neighbours whose union with this obstacle would exceed the caps
-        while True:
-            entry = self._entries[uuid]
-            self._nearby.put(uuid, entry.rectangle)
-            near = sorted(u for u in self._nearby.near(entry.rectangle, self._merge_distance)
-                          if u != uuid and u not in refused
-                          and self._mergeable(self._entries[u].rectangle, entry.rectangle))
-            if not near:
-                return uuid
-            # One pair at a time: absorbing is a join, so the merged obstacle is the same in any
-            # order; checked pairwise, no merge makes an obstacle larger than the caps.
-            survivor, absorbed = sorted((uuid, near[0]))
-            if not self._merge_fits(self._entries[survivor], self._entries[absorbed]):
-                refused.add(near[0])
-                continue
-            self._absorb(survivor, absorbed)
-            uuid = survivor
-
-    def _merge_fits(self, a, b):
-        """True when the union of two held obstacles stays within the caps; else counted and logged."""
-        rectangle = a.rectangle.union(b.rectangle)
-        cells = len(a.present) + len(b.present)
-        if cells > self._policy.cell_cap(a.geometry):
-            cells = len(a.present | b.present)
-        if self._policy.fits(rectangle, cells, a.geometry):
-            return True
-        self._counters["merges_refused"] += 1
-        _log.warning("%s: obstacles %s %s (from %s) and %s %s (from %s) lie within merge_distance but "
-                     "are not merged: the union %s with %d cells exceeds max_obstacle_extent %g m or "
-                     "max_obstacle_cells %d", self.robot_name, a.uuid, a.rectangle, a.source, b.uuid,
-                     b.rectangle, b.source, rectangle, cells, self._policy.max_extent,
-                     self._policy.cell_cap(a.geometry))
-        return False
-
-    def _absorb(self, survivor_uuid, absorbed_uuid):
-        survivor, absorbed = self._entries[survivor_uuid], self._entries.pop(absorbed_uuid)
-        self._nearby.remove(absorbed_uuid)
-        self._quotas.removed(absorbed.owner)
-        survivor.absorb(absorbed)
-        self._nearby.put(survivor_uuid, survivor.rectangle)
-        self._aliases[absorbed_uuid] = survivor_uuid
-        self._counters["merged_obstacles"] += 1
-        _log.info("%s: obstacles %s %s and %s %s lie within merge_distance %g m: merged into %s, "
-                  "rectangle now %s", self.robot_name, survivor_uuid, survivor.rectangle, absorbed_uuid,
-                  absorbed.rectangle, self._merge_distance, survivor_uuid, survivor.rectangle)
-        # The layer holds both: it drops the absorbed one and gets its cells under the survivor's
-        # uuid, with their own stamps, so its cells stay the handler's.
-        self._expired_out(absorbed_uuid)
-        left = remaining_deadline(survivor.expires_at - self._clock())
-        by_stamp = {}
-        for cell, stamp in absorbed.stamps.items():
-            marked, cleared = by_stamp.setdefault(stamp, ([], []))
-            (marked if cell in absorbed.present else cleared).append(cell)
-        for (version, source), (marked, cleared) in sorted(by_stamp.items()):
-            self._to_layer(Obstacle(uuid=survivor_uuid, marked=tuple(sorted(marked)),
-                                    cleared=tuple(sorted(cleared)), deadline=left,
-                                    rectangle=survivor.rectangle, source=source, geometry=survivor.geometry,
-                                    version=version, frame_id=survivor.frame_id))
-        self._on_change()
 
     def _check_external(self, obstacle):
         # The same rules the bridge applies to what arrives over MQTT (neither is looser).

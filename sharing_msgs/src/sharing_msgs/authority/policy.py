@@ -1,5 +1,5 @@
 """Bounded authority of a peer (issue 27, DESIGN.md §6a): the receiver's own caps on what any
-message may make of an obstacle. Pure Python, no ROS.
+message may make of an obstacle, and the window its stamp must lie in. Pure Python, no ROS.
 
 A peer can send any value the message format carries (a whole-map rectangle, version 2^53-1,
 deadline 2^32-1 s, a stamp from last week). None of them is wrong as a format, so the bridge's
@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import Optional
 
-from sharing_handler_py.errors import InvalidMessageError
+from sharing_msgs.authority.errors import AuthorityError
 
 
 @dataclass(frozen=True)
@@ -61,20 +61,20 @@ class PeerPolicy:
     def check_extent(self, rectangle, what="rectangle"):
         width, height = rectangle.max_x - rectangle.min_x, rectangle.max_y - rectangle.min_y
         if max(width, height) > self.max_extent:
-            raise InvalidMessageError("oversized_rectangle", "%s %s is %g m x %g m, larger than "
+            raise AuthorityError("oversized_rectangle", "%s %s is %g m x %g m, larger than "
                                       "max_obstacle_extent %g m" % (what, rectangle, width, height,
                                                                     self.max_extent))
 
     def check_cells(self, count, geometry, what="obstacle"):
         cap = self.cell_cap(geometry)
         if count > cap:
-            raise InvalidMessageError("too_many_obstacle_cells", "%s would hold %d cells, more than "
+            raise AuthorityError("too_many_obstacle_cells", "%s would hold %d cells, more than "
                                       "max_obstacle_cells %d" % (what, count, cap))
 
     def check_version(self, version, highest_seen):
         """``highest_seen``: the obstacle's greatest version held here, 0 when it is new."""
         if version > highest_seen + self.max_version_step:
-            raise InvalidMessageError("implausible_version", "version %d is more than max_version_step "
+            raise AuthorityError("implausible_version", "version %d is more than max_version_step "
                                       "%d beyond the highest seen for it (%d)"
                                       % (version, self.max_version_step, highest_seen))
 
@@ -103,9 +103,9 @@ class PeerPolicy:
         if self.max_clock_skew is None:
             return
         if stamp < now - self.max_message_age:
-            raise InvalidMessageError("stale_stamp", "stamp %.3f is %.1f s old, more than %g s "
+            raise AuthorityError("stale_stamp", "stamp %.3f is %.1f s old, more than %g s "
                                       "(obstacle_duration + max_clock_skew): a replay or a dead message"
                                       % (stamp, now - stamp, self.max_message_age))
         if stamp > now + self.max_clock_skew:
-            raise InvalidMessageError("future_stamp", "stamp %.3f is %.1f s ahead of our clock, more "
+            raise AuthorityError("future_stamp", "stamp %.3f is %.1f s ahead of our clock, more "
                                       "than max_clock_skew %g s" % (stamp, stamp - now, self.max_clock_skew))
