@@ -57,8 +57,10 @@ def coaty_js():
 
 def ros_obstacle(source, **fields):
     # 64 cells in a row, so the compact form is the deflated one; 3 scattered cleared cells.
-    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=list(range(2001000, 2001064)) + [2003005, 3999999],
-               cleared_indexes=[5, 2000999, 2002999], deadline=90, rectangle_shape=[0.25, 7.5, 1.75, 9.0], source=source,
+    # (all inside the rectangle: x 255..284, y 5..34 on this grid)
+    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=[y * 2000 + x for y in (5, 6, 7) for x in range(255, 277)][:64]
+               + [30 * 2000 + 260, 34 * 2000 + 284], cleared_indexes=[8 * 2000 + 255, 20 * 2000 + 270, 34 * 2000 + 255],
+               deadline=90, rectangle_shape=[0.25, 7.5, 1.75, 9.0], source=source,
                resolution=0.05000000074505806, origin_x=-12.5, origin_y=7.25, size_x=2000, size_y=2000,
                version=1, stamp=1700000123.5, frame_id="map")
     msg.update(fields)
@@ -203,7 +205,7 @@ def test_renewals_events_pass_between_a_bridge_and_coaty_js(coaty_js, json_lines
                 except AssertionError:
                     continue
             now[0] = 1010.0
-            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(2001500,), cleared=(),
+            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(880250,), cleared=(),
                                                        deadline=100))
             now[0] = 1090.0
             assert source.renew_due() == 1

@@ -102,7 +102,8 @@ def launch_bridge_params(robot, credentials):
     name:=value; test_secure_launch.py in fleet_tests checks the launch against this list."""
     return ["broker_url_param:=/fleet/broker_url", "insecure:=false", "authenticate_sources:=true",
             "password_file:=%s/robots/%s.password" % (credentials, robot),
-            "footprint_topic:=move_base/global_costmap/footprint", "footprint_rate:=2.0", "robot_timeout:=3.0"]
+            "footprint_topic:=move_base/global_costmap/footprint", "footprint_rate:=2.0", "robot_timeout:=3.0",
+            "require_evidence:=true", "sensor_reach:=4.0", "max_sensor_reach:=4.0"]
 
 
 class Lines:

@@ -25,6 +25,7 @@ from coaty_bridge.config import (BridgeConfig, BrokerAddress, BrokerUrlChoice, c
                                  parse_broker_url)
 from coaty_bridge.connection import (FIRST_UNREACHABLE_WARN_AFTER, ConnectionMixin, _make_paho_client,  # noqa: F401
                                      mqtt_client_id)
+from coaty_bridge.evidence import EvidenceMixin
 from coaty_bridge.discovery import (RESOLVE_BATCH, RESOLVE_BATCH_BYTES, _MAX_DISCOVER_REQUESTERS,  # noqa: F401
                                     DiscoveryMixin)
 from coaty_bridge.heartbeats import HeartbeatMixin
@@ -32,12 +33,12 @@ from coaty_bridge.incoming import IncomingMixin
 from coaty_bridge.liveness import CHANNEL as HEARTBEAT_CHANNEL, ECHO_CHANNEL, Liveness
 from coaty_bridge.outgoing import OWN_LOG_PER_OBSTACLE, OutgoingMixin  # noqa: F401
 from coaty_bridge.topics import Topic, new_uuid, subscription
-from sharing_msgs.authority import DropReport, FairQueue, TokenBuckets
+from sharing_msgs.authority import DropReport, FairQueue, PoseHistory, TokenBuckets
 
 LOG = logging.getLogger(__name__)
 
 
-class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, IncomingMixin, DiscoveryMixin):
+class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, IncomingMixin, DiscoveryMixin, EvidenceMixin):
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
 
@@ -52,6 +53,12 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         # series or of its agent: stopped, or its navigation went quiet), so it is forgotten at once
         self._on_footprint_withdrawn = on_footprint_withdrawn
         self._footprint_senders = {}   # sourceId -> (robot, advert objectId) of footprints heard
+        # plausible evidence (evidence.py): what each peer advertised, this robot's latest footprint and the last
+        # evidence advert sent (time, points, stamp)
+        self._poses = PoseHistory(config.evidence_rule)
+        self._own_footprint = None
+        self._last_evidence = None
+        self._evidence_warned = None
         self.footprint_object_id = new_uuid()
         self._clock = clock
         self._qos = qos

@@ -9,6 +9,7 @@ from coaty_bridge.errors import CoatyError
 from coaty_bridge.identity import identity_for
 from coaty_bridge.security import is_loopback
 from coaty_bridge.topics import check_name, check_uuid, new_uuid
+from sharing_msgs.authority import EvidenceRule
 
 _SCHEMES = {"mqtt": (False, 1883), "tcp": (False, 1883), "mqtts": (True, 8883),
             "ssl": (True, 8883), "tls": (True, 8883)}
@@ -56,6 +57,19 @@ class BridgeConfig:
     # the handler's caps on one obstacle (same meaning, same defaults): checked before expanding
     max_obstacle_extent: float = 10.0
     max_obstacle_cells: int = 0
+    # Plausible evidence (issue 43; sharing_msgs README, "Plausible evidence"). sensor_reach: m, this robot's
+    # sensor reach, advertised with its footprint (max of the layer's obstacle_range, raytrace_range and
+    # trigger_radius). max_sensor_reach: m, the most any robot may claim; a robot's obstacle is at most
+    # 2 x (it + 0.5 m) across, like the handler's (0: max_obstacle_extent alone). require_evidence: a peer's
+    # obstacle message keeps only the cells within its reach of a pose it advertised near the stamp (the
+    # fleet launch sets it with authenticate_sources). The slack: evidence_window s, max_robot_speed m/s,
+    # localisation_tolerance m.
+    sensor_reach: float = 4.0
+    max_sensor_reach: float = 0.0
+    require_evidence: bool = False
+    evidence_window: float = 2.0
+    max_robot_speed: float = 1.0
+    localisation_tolerance: float = 0.25
     offline_queue_size: int = 1000
     compact_indexes: bool = True
     keepalive: int = 60
@@ -167,9 +181,24 @@ class BridgeConfig:
             fail("compact_indexes", "must be true or false")
         try:
             object.__setattr__(self, "_limits", codec.CodecLimits(
-                self.max_payload_bytes, self.max_indexes, self.max_obstacle_extent, self.max_obstacle_cells))
+                self.max_payload_bytes, self.max_indexes, self.max_obstacle_extent, self.max_obstacle_cells,
+                self.max_sensor_reach))
         except ValueError as err:
-            fail("max_obstacle_cells" if "cells" in str(err) else "max_obstacle_extent", err)
+            fail("max_obstacle_cells" if "cells" in str(err) else
+                 "max_sensor_reach" if "reach" in str(err) else "max_obstacle_extent", err)
+        if not isinstance(self.require_evidence, bool):
+            fail("require_evidence", "must be true or false")
+        for name, high in (("sensor_reach", 1000.0), ("evidence_window", 3600.0), ("max_robot_speed", 100.0),
+                           ("localisation_tolerance", 100.0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= high:
+                fail(name, "must be a number 0..%g" % high)
+        try:
+            object.__setattr__(self, "_evidence_rule", EvidenceRule(
+                max_sensor_reach=self.max_sensor_reach or self.sensor_reach, window=self.evidence_window,
+                max_speed=self.max_robot_speed, localisation_tolerance=self.localisation_tolerance))
+        except ValueError as err:
+            fail("max_sensor_reach", err)
         if isinstance(self.discover_answer_burst, bool) or not isinstance(self.discover_answer_burst, int) \
                 or not 1 <= self.discover_answer_burst <= 1000:
             fail("discover_answer_burst", "must be an integer 1..1000")
@@ -223,6 +252,12 @@ class BridgeConfig:
     @property
     def limits(self):
         return self._limits
+
+    @property
+    def evidence_rule(self):
+        """The slack of plausible evidence (sharing_msgs.authority.EvidenceRule); the reach cap is max_sensor_reach,
+        or this robot's own sensor_reach when that is 0."""
+        return self._evidence_rule
 
 
 class BrokerUrlChoice:

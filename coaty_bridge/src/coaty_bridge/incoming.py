@@ -7,10 +7,12 @@ import select
 import time
 
 from coaty_bridge import areas, codec, footprint as footprints, renewals
-from coaty_bridge.errors import CoatyError, FootprintTooLargeError, ForgedSourceError, UnknownRobotError, WrongTypeError
+from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, ReservedSourceError,
+                                 UnknownRobotError, WrongTypeError)
 from coaty_bridge.identity import identity_for
 from coaty_bridge.liveness import CHANNEL as HEARTBEAT_CHANNEL, ECHO_CHANNEL
 from coaty_bridge.topics import check_name, parse_topic
+from sharing_msgs.authority import MASTER_CONTROL
 
 LOG = logging.getLogger("coaty_bridge.client")
 
@@ -188,6 +190,12 @@ class IncomingMixin:
             self._deliver(update, topic)
 
     def _deliver(self, update, topic):
+        if update.source == MASTER_CONTROL:
+            # master control's areas reach a robot through its own VDA 5050 bridge, never from a peer
+            self._drop(ReservedSourceError("obstacle %s v%d claims source %r, which no robot may use (sourceId %s)"
+                                           % (update.uuid, update.version, update.source, topic.source_id)),
+                       str(topic), b"")
+            return
         if self.config.authenticate_sources:
             expected = identity_for(self.config.namespace, update.source)
             if topic.source_id != expected:
@@ -198,6 +206,12 @@ class IncomingMixin:
                     "obstacle %s v%d claims source %r (identity %s) but was sent by %s"
                     % (update.uuid, update.version, update.source, expected, topic.source_id)),
                     str(topic), b"")
+                return
+        if self.config.require_evidence and topic.event != "RSV":
+            # an observation (an Advertise, a renewal) carries only what its sender could have seen; a Resolve
+            # restores state and is no observation: the handler never takes it as a renewal (fleet_state)
+            update = self._judge(update, topic)
+            if update is None:
                 return
         self._count("received")
         try:
@@ -231,6 +245,7 @@ class IncomingMixin:
             self._count("footprints_own_name")
             return
         self._count("footprints_received")
+        self._note_sighting(footprint)
         if self._on_footprint is None:
             return True
         try:

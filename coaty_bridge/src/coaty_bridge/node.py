@@ -1,7 +1,8 @@
 """rospy node ``coaty_bridge``: wires the robot's topics to one Coaty agent.
 
     to_fleet (SharedObstacle)               -> Advertise to the fleet
-    fleet (Advertise / Resolve)             -> from_fleet (SharedObstacle)
+    fleet (Advertise, renewals)             -> from_fleet (SharedObstacle): observations
+    fleet (Resolve to our Discover)         -> fleet_state (SharedObstacle): copies restoring state
     shared_obstacle_list (SharedObstacleArray, latched) -> answers to obstacle Discovers
     move_base/global_costmap/footprint (PolygonStamped) -> Advertise of this robot's footprint, 2 Hz
     fleet (footprint Advertise)             -> fleet_robots (RobotFootprintArray, latched, 2 Hz)
@@ -30,6 +31,10 @@ from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotT
 
 LOG = logging.getLogger(__name__)
 
+#: per-sender drop counters named in /diagnostics as they rise: floods (issue 27) and implausible evidence (issue 43)
+SENDER_DROPS = ("dropped_source_rate_limited.", "dropped_source_queue_full.", "dropped_implausible_cells.",
+                "dropped_implausible_evidence.")
+
 # private parameter -> BridgeConfig field default; the types are checked by BridgeConfig
 _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
@@ -37,7 +42,9 @@ _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "i
            "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "discover_answers", "authenticate_sources", "footprint_area_size",
            "obstacle_area_size",
            "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
-           "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")
+           "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size",
+           "sensor_reach", "max_sensor_reach", "require_evidence", "evidence_window", "max_robot_speed",
+           "localisation_tolerance")
 
 
 def msg_to_update(msg):
@@ -229,6 +236,10 @@ class BridgeNode:
         self.from_fleet = SafePublisher(
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
             topic="%s/from_fleet" % config.robot_name)
+        # Resolves answering our Discover restore state: the handler never takes them as a renewal (issue 43)
+        self.fleet_state = SafePublisher(
+            lambda: rospy.Publisher("fleet_state", SharedObstacle, queue_size=1000),
+            topic="%s/fleet_state" % config.robot_name)
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint,
                                         on_footprint_withdrawn=self._on_fleet_footprint_withdrawn)
@@ -280,7 +291,7 @@ class BridgeNode:
         except Exception as err:  # noqa: BLE001 - one bad value must not stop delivery
             self.from_fleet.drop("conversion", what, err)
             return
-        self.from_fleet.publish(msg, what)
+        (self.fleet_state if topic.event == "RSV" else self.from_fleet).publish(msg, what)
 
     def _on_own_footprint(self, msg):
         try:
@@ -293,6 +304,7 @@ class BridgeNode:
         now = rospy.get_time()
         self._own_footprint = (footprint, now)
         self.client.note_own_position(centroid(footprint.points))
+        self.client.note_own_footprint(footprint)   # the evidence before its obstacle messages
         # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
         # at most min_move (plus transport), not by a whole heartbeat period of driving.
         if self.footprint_config.advertise:
@@ -403,8 +415,7 @@ class BridgeNode:
     def _new_source_drops(self, counters):
         """'robot_9@1a2b3c4d: 3785 dropped_source_rate_limited' for the senders whose excess was dropped
         since the last report (issue 27, item 3), the three largest; "" when none."""
-        per_sender = {k: n for k, n in counters.items() if k.startswith(("dropped_source_rate_limited.",
-                                                                      "dropped_source_queue_full."))}
+        per_sender = {k: n for k, n in counters.items() if k.startswith(SENDER_DROPS)}
         last = self._sender_drops_reported
         self._sender_drops_reported = per_sender
         new = sorted(((n - last.get(k, 0), k) for k, n in per_sender.items() if n > last.get(k, 0)), reverse=True)
@@ -432,9 +443,9 @@ class BridgeNode:
             status.level = DiagnosticStatus.WARN
             status.message = problem
         elif flood:
-            # a flooding sender (issue 27, item 3): name it and the limit
+            # a flooding sender (issue 27, item 3) or one claiming what it could not see (issue 43): name it
             status.level = DiagnosticStatus.WARN
-            status.message = "dropping a sender's excess: " + flood
+            status.message = "dropping a sender's excess or implausible cells: " + flood
         elif self.client.connected:
             # connected is not enough (issue 27, attack 6): do heartbeats cross the bus?
             live, reason = self.client.liveness.status()

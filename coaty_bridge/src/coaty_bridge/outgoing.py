@@ -2,6 +2,7 @@
 obstacle with renewals for far robots), its footprint adverts, and the queue that keeps updates while
 the broker is away. A part of CoatyBridgeClient (client.py)."""
 import collections
+import dataclasses
 import logging
 import math
 
@@ -30,6 +31,7 @@ class OutgoingMixin:
         """Publishes one internal ObstacleUpdate to the fleet (Advertise), fleet-wide or to the area
         around the obstacle (``_area_for``). Returns False if it was dropped (too large); queues it
         while offline."""
+        self._send_evidence()   # every peer hears where this robot is before what it saw (evidence.py)
         area = self._area_for(update)
         object_type = self.config.object_type if area is None else areas.area_object_type(self.config.object_type,
                                                                                             area)
@@ -141,6 +143,7 @@ class OutgoingMixin:
         """Advertises this robot's footprint (a RobotFootprint), under the objectType of the area
         it stands in. Not queued while offline: an old pose is worth nothing. Returns False when
         it was not sent."""
+        footprint = dataclasses.replace(footprint, reach=self.config.sensor_reach)
         where = footprints.centroid(footprint.points)
         self.note_own_position(where)
         object_type, topic = self.config.footprint_object_type, self._footprint_topic

@@ -169,15 +169,6 @@ class Entry:
         `deadline` s remain (already capped by the policy): the greater lease wins."""
         self.expires_at = max(self.expires_at, now + deadline)
 
-    def note_lease(self, now, deadline, observed):
-        """A fleet message arrived at `now` with `deadline` s left (capped by the policy). Only an
-        observation renews; anything else keeps the earlier expiry, so a peer's clear or stale
-        copy can never push the lease back."""
-        if observed:
-            self.note_deadline(now, deadline)
-        else:
-            self.expires_at = min(self.expires_at, now + deadline)
-
     def cells(self):
         if self.sorted_cells is None:
             self.sorted_cells = tuple(sorted(self.present))

@@ -18,15 +18,25 @@ are one obstacle. The one with the smaller uuid absorbs the other: per cell the 
 wins, as if every update of both had been sent for the surviving uuid, and later messages for
 the absorbed uuid are applied to the survivor. Rectangles only grow, so two obstacles once
 within merge_distance stay so, and every robot ends with the same merged obstacles whatever
-the order the messages came in. A proposal within merge_distance of a live obstacle becomes an
-update of it. Merges stop at the caps (issue 27): two obstacles whose union would exceed
-max_obstacle_extent or max_obstacle_cells stay apart; only there can robots that saw the
-obstacles in different orders end with different groups.
+the order the messages came in. A proposal within merge_distance of a live obstacle of this robot's
+becomes an update of it. Merges stop at the caps (issue 27): two obstacles whose union would exceed
+the extent or cell caps stay apart; only there can robots that saw the obstacles in different orders
+end with different groups.
 
-Leases (issue 12): a message that marks cells is an observation of the obstacle; the robot
-that made it gives it a full obstacle_duration again. A held obstacle expires at the latest
-arrival + deadline of any observation of it (the greatest lease wins, whatever the order).
-Messages that only clear cells carry the lifetime left, so they never extend it.
+Provenance (issue 43): only obstacles first shared by the same source merge, so a merged obstacle never
+shows a source that did not send its cells: another robot's obstacle, or master control's area, is
+never absorbed, and a proposal near another robot's obstacle is an obstacle of its own. With
+``max_sensor_reach`` set, a robot's obstacle (merged or not) is at most what one robot can see across
+(sharing_msgs.authority.single_robot_extent), so it cannot grow by absorbing beyond that either.
+
+Leases (issue 12, issue 43): a live message that marks cells is an observation of the obstacle; the
+robot that made it gives it a full obstacle_duration again. A held obstacle expires at the latest
+arrival + deadline of any observation of it (the greatest lease wins, whatever the order). A message
+that marks nothing (a clear) never changes the lease: it removes the cells it saw free and leaves the
+rest as long-lived as before. Copies that restore state (``on_state``: Discover answers, a restarted
+handler's own copies) are no observation: they may add an obstacle, never renew one. Which marked
+cells count is the bridge's to check (plausible evidence, sharing_msgs.authority.evidence): a peer's
+message reaches this handler with only the cells its sensors could have seen.
 
 Evidence ends an obstacle (issue 26): when an update (this robot's or a peer's) leaves an
 obstacle with no present cell, every cell of it was seen free, and the obstacle leaves the list,
@@ -37,11 +47,16 @@ depend on the order: a later mark (a newer stamp: the block is back) shows it ag
 and an older one stays cleared. The lease (obstacle_duration after the last observation) only
 bounds what nobody checks.
 
+Tombstones (issue 27, issue 43): an expired uuid is remembered, so that a late or replayed message
+cannot bring it back on this robot only. A tombstone never stops a robot that sees the obstacle again:
+a live message stamped after the tombstone that marks cells shows it again (``revived``), and this
+robot's own layer marking cells of an expired obstacle shares them as a new obstacle (``reshared``).
+
 Bounded authority (issue 27, sharing_msgs.authority): no peer can make an obstacle larger, longer-lived
 or newer than this handler's own caps. A deadline is cut to obstacle_duration on arrival (so a
-renewal reaches at most arrival + obstacle_duration), a message that does not mark cells can
-only bring the expiry closer (the earlier expiry is kept), a message beyond the extent, cell or
-version caps is dropped, and two obstacles whose union would exceed the caps are not merged.
+renewal reaches at most arrival + obstacle_duration), a message beyond the extent, cell or version
+caps, or with a cell outside its rectangle, is dropped, and two obstacles whose union would exceed
+the caps are not merged.
 """
 import heapq
 import logging
@@ -56,7 +71,7 @@ from sharing_handler_py.nearby import RectangleIndex
 from sharing_handler_py.validation import Geometry, check_fleet_message, check_message_values, check_uuid, \
     check_indexes
 from sharing_msgs import obstacle_rules
-from sharing_msgs.authority import DropReport, PeerPolicy, SourceQuotas
+from sharing_msgs.authority import DropReport, PeerPolicy, SourceQuotas, check_cells_inside
 
 _log = logging.getLogger(__name__)
 
@@ -85,9 +100,13 @@ DROP_REASONS = (
     "implausible_version",  # more than max_version_step beyond the highest version seen
     "stale_stamp",          # stamped longer ago than obstacle_duration + max_clock_skew
     "future_stamp",         # stamped more than max_clock_skew ahead of our clock
+    # issue 43: a message's cells lie inside its rectangle (sharing_msgs.authority.check_cells_inside)
+    "cells_outside_rectangle",    # a cell whose centre lies outside the message's rectangle
+    "more_cells_than_rectangle",  # more cells than the rectangle holds
     # issue 27, per-source quotas (sharing_msgs.authority.quotas): counted per source too, logged once per 10 s
     "source_quota",         # a new obstacle from a source already holding max_obstacles_per_source here
     "source_rate",          # beyond the source's token bucket (source_update_rate, source_update_burst)
+    "source_queue_full",    # the node's queue for that source was full (issue 43: fair delivery, node.py)
 )
 
 #: Counters besides the drops.
@@ -95,7 +114,11 @@ EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_ou
                   "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals",
                   "cleared_by_evidence",  # deleted at once: an update left no present cell (issue 26)
                   "capped_deadlines",  # a peer's deadline cut to obstacle_duration
-                  "merges_refused")    # two obstacles left apart: their union exceeds the caps
+                  "merges_refused",    # two obstacles left apart: their union exceeds the caps
+                  "state_copies",      # copies restoring state (on_state): applied, never a renewal
+                  "revived",           # a tombstoned obstacle observed again after its tombstone
+                  "reshared",          # this robot's layer marked cells of an expired obstacle: a new share
+                  "clears_kept_lease")  # a message marking nothing left the lease as it was (issue 43)
 
 def _noop(*_args):
     pass
@@ -122,16 +145,18 @@ class SharingHandler(MergingMixin, ManualMixin):
         merge_distance: metres; obstacles (and proposals) whose rectangles lie this close are
             one obstacle (issue 12, merging). A robot needs at least twice its inscribed radius
             to pass between two obstacles, so a smaller gap is no passage anyway.
-        max_obstacle_extent, max_obstacle_cells, max_version_step, max_clock_skew: the caps of
-            every message and merge (sharing_msgs.authority.PeerPolicy); max_clock_skew None = stamps are
-            not compared with the clock.
+        max_obstacle_extent, max_obstacle_cells, max_version_step, max_clock_skew, max_sensor_reach: the
+            caps of every message and merge (sharing_msgs.authority.PeerPolicy); max_clock_skew None =
+            stamps are not compared with the clock; max_sensor_reach 0 = robots' obstacles are bounded
+            by max_obstacle_extent alone.
     """
 
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
                  max_deferred=10000, max_obstacle_extent=10.0, merge_distance=0.5,
                  max_obstacle_cells=0, max_version_step=1000000, max_clock_skew=None,
-                 max_obstacles_per_source=1000, source_update_rate=100.0, source_update_burst=2000):
+                 max_obstacles_per_source=1000, source_update_rate=100.0, source_update_burst=2000,
+                 max_sensor_reach=0.0):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -157,11 +182,12 @@ class SharingHandler(MergingMixin, ManualMixin):
         self._merge_distance = float(merge_distance)
         self._policy = PeerPolicy(max_extent=max_obstacle_extent, max_lifetime=self._deadline,
                                   max_obstacle_cells=max_obstacle_cells, max_version_step=max_version_step,
-                                  max_clock_skew=max_clock_skew)
+                                  max_clock_skew=max_clock_skew, max_sensor_reach=max_sensor_reach)
         self._entries = {}      # uuid -> _Entry
         self._nearby = RectangleIndex()  # uuid -> rectangle of every entry, for merging
         self._aliases = {}      # uuid of an absorbed obstacle -> uuid that absorbed it
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
+        self._tombstoned_at = {}  # uuid -> clock time it was tombstoned (a live mark stamped later revives it)
         self._deadlines = []    # heap of (expires_at, uuid), one item per value an entry's expiry took
         self._tomb_heap = []    # heap of (until, uuid) of the tombstones
         self._deferred = []     # fleet messages waiting for a grid
@@ -228,8 +254,8 @@ class SharingHandler(MergingMixin, ManualMixin):
                          self.robot_name, self._geometry, geometry)
         self._geometry = geometry
         deferred, self._deferred = self._deferred, []
-        for obstacle in deferred:
-            self.on_external(obstacle)
+        for obstacle, live in deferred:
+            self.on_external(obstacle, live)
 
     def on_proposal(self, obstacle):
         """A new obstacle proposed by the layer. Returns the authorised Obstacle (version 1), the
@@ -248,8 +274,9 @@ class SharingHandler(MergingMixin, ManualMixin):
                 self.set_geometry(obstacle.geometry)
             self._check_grid(obstacle)
             # the layer's topic is open to any ROS node: the same caps as for a peer
-            self._policy.check_extent(obstacle.rectangle, "proposal rectangle")
-            self._policy.check_cells(len(obstacle.marked), self._geometry, "proposal")
+            self._policy.check_extent(obstacle.rectangle, "proposal rectangle", self.robot_name)
+            self._policy.check_cells(len(obstacle.marked), self._geometry, "proposal", self.robot_name)
+            self._check_inside(obstacle, "proposal")
         except REFUSED as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
@@ -267,6 +294,8 @@ class SharingHandler(MergingMixin, ManualMixin):
                 # the layer still knows an obstacle that was merged into another one
                 obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
             if obstacle.uuid in self._tombstones:
+                if obstacle.marked and self._geometry is not None:
+                    return self._reshare(obstacle)
                 raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
             entry = self._entries.get(obstacle.uuid)
             if entry is None:
@@ -283,8 +312,10 @@ class SharingHandler(MergingMixin, ManualMixin):
                 raise InvalidMessageError("bad_version", "obstacle %s is at the last version %d"
                                           % (obstacle.uuid, entry.max_version))
             # what goes out must pass every peer's caps; the own obstacle grows by union
-            self._policy.check_extent(entry.rectangle.union(obstacle.rectangle), "grown rectangle")
-            self._policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "update")
+            self._policy.check_extent(entry.rectangle.union(obstacle.rectangle), "grown rectangle", entry.source)
+            self._policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "update",
+                                     entry.source)
+            self._check_inside(obstacle, "update")
         except REFUSED as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
@@ -335,17 +366,25 @@ class SharingHandler(MergingMixin, ManualMixin):
             self._merge_around(obstacle.uuid)
         return obstacle
 
-    def on_external(self, obstacle):
+    def on_state(self, obstacle):
+        """A copy that restores state (a Discover answer through the bridge, or what the bridge kept
+        for a restarted handler): applied like a fleet message, but no observation, so it may add an
+        obstacle and never renews one; it cannot lift a tombstone. Returns as on_external."""
+        self._counters["state_copies"] += 1
+        return self.on_external(obstacle, live=False)
+
+    def on_external(self, obstacle, live=True):
         """A message from another robot (via the bridge): added or applied, passed to the layer,
-        never sent back out. Returns True when applied now; False when dropped or deferred
+        never sent back out. ``live``: an observation as it was made (an Advertise, a renewal); a
+        state copy is not (on_state). Returns True when applied now; False when dropped or deferred
         (waiting for a grid)."""
         try:
-            self._check_external(obstacle)
+            revive = self._check_external(obstacle, live)
             if self._geometry is None:
                 if len(self._deferred) >= self._max_deferred:
                     raise InvalidMessageError("no_geometry", "no grid known yet and %d messages "
                                               "already waiting" % len(self._deferred))
-                self._deferred.append(obstacle)
+                self._deferred.append((obstacle, live))
                 self._counters["deferred"] += 1
                 _log.debug("%s: no grid yet; message %s v%d from %s waits for the map",
                            self.robot_name, obstacle.uuid, obstacle.version, obstacle.source)
@@ -363,6 +402,8 @@ class SharingHandler(MergingMixin, ManualMixin):
         except REFUSED as err:
             self.reject(obstacle.source, obstacle.uuid, err)
             return False
+        if revive:
+            self._revive(obstacle)
         if obstacle.deadline > self._policy.max_lifetime:
             self._counters["capped_deadlines"] += 1
             _log.info("%s: message %s v%d from %s says %d s left; cut to obstacle_duration %d s",
@@ -380,10 +421,15 @@ class SharingHandler(MergingMixin, ManualMixin):
                       obstacle.uuid, obstacle.source, obstacle.version, len(entry.present),
                       obstacle.deadline)
         else:
-            rectangle = entry.rectangle
+            rectangle, creator_known = entry.rectangle, entry.first_key[0] == 1
             changed = entry.apply(obstacle)
-            grown = entry.rectangle is not rectangle
-            entry.note_lease(self._clock(), obstacle.deadline, observed=bool(obstacle.marked))
+            # a grown rectangle can reach another obstacle; a first share that arrived late makes its
+            # creator known, and only then can it merge (merging.py)
+            grown = entry.rectangle is not rectangle or (not creator_known and entry.first_key[0] == 1)
+            if live and obstacle.marked:
+                entry.note_deadline(self._clock(), obstacle.deadline)   # an observation renews
+            elif not obstacle.marked:
+                self._counters["clears_kept_lease"] += 1
         self._counters["updates_in"] += 1
         self._to_layer(obstacle)
         if changed:
@@ -419,6 +465,7 @@ class SharingHandler(MergingMixin, ManualMixin):
             until, uuid = heapq.heappop(tombs)
             if self._tombstones.get(uuid) == until:
                 del self._tombstones[uuid]
+                self._tombstoned_at.pop(uuid, None)
         if len(heap) > 4 * len(entries) + 64:
             self._compact_deadlines()
         self._quota_log.flush(now)
@@ -436,7 +483,10 @@ class SharingHandler(MergingMixin, ManualMixin):
         """A message beyond its source's quota: counted (in all and per source), logged at most once
         per 10 s per source and reason, state untouched. Returns False (not applied)."""
         self._counters["dropped_" + reason] += 1
-        if reason == "source_quota":
+        if reason == "source_queue_full":
+            hint = ("its queue in this handler holds the most messages waiting per source; obstacle %s v%d dropped. "
+                    "Another source's messages do not wait behind it" % (obstacle.uuid[:40], obstacle.version))
+        elif reason == "source_quota":
             hint = ("it already holds %d live obstacles here (max_obstacles_per_source %d); new obstacle %s "
                     "refused. A robot sharing that many is faulty or hostile; raise ~max_obstacles_per_source "
                     "only if the fleet needs it" % (self._quotas.live[obstacle.source], self._quotas.max_obstacles,
@@ -448,6 +498,11 @@ class SharingHandler(MergingMixin, ManualMixin):
                     % (buckets.rate, buckets.burst, obstacle.uuid[:40], obstacle.version))
         self._quota_log.drop(obstacle.source, reason, now, hint)
         return False
+
+    def queue_full(self, obstacle):
+        """The node dropped ``obstacle`` because its source's queue was full: counted per source and logged
+        at most once per 10 s per source, like the quotas."""
+        return self._quota_drop(obstacle, "source_queue_full", self._clock())
 
     def reject(self, source, uuid, error):
         """Drops a message: one log line naming the source robot and the reason, one counter."""
@@ -469,10 +524,12 @@ class SharingHandler(MergingMixin, ManualMixin):
         self._quotas.removed(entry.owner)
         until = now + max(self._policy.tombstone_time, entry.deadline)
         self._tombstones[uuid] = until
+        self._tombstoned_at[uuid] = now
         heapq.heappush(self._tomb_heap, (until, uuid))
         for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
             del self._aliases[alias]
             self._tombstones[alias] = until
+            self._tombstoned_at[alias] = now
             heapq.heappush(self._tomb_heap, (until, alias))
         return entry
 
@@ -507,16 +564,31 @@ class SharingHandler(MergingMixin, ManualMixin):
         self._on_change()
         return shared
 
-    def _check_external(self, obstacle):
+    def _check_external(self, obstacle, live=True):
         # The same rules the bridge applies to what arrives over MQTT (neither is looser).
         check_fleet_message(obstacle)
         if obstacle.source == self.robot_name and obstacle.uuid in self._entries:
             # An echo, or someone else speaking for us about an obstacle we hold. An own obstacle
             # we do not hold is accepted: after a restart, peers give our obstacles back.
             raise InvalidMessageError("own_source", "message claims to come from this robot")
+        revive = False
         if obstacle.uuid in self._tombstones:
-            raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+            since = self._tombstoned_at.get(obstacle.uuid)
+            if not (live and obstacle.marked and since is not None and obstacle.stamp > since):
+                raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+            revive = True
         self._policy.check_stamp(obstacle.stamp, self._clock())
+        return revive
+
+    def _revive(self, obstacle):
+        """Lifts the tombstone of an obstacle seen occupied after it expired here (a live mark stamped
+        later): the robot that sees it again shares it again."""
+        since = self._tombstoned_at.pop(obstacle.uuid)
+        del self._tombstones[obstacle.uuid]
+        self._counters["revived"] += 1
+        _log.info("%s: obstacle %s, expired here at %.3f, seen occupied again by %s (v%d stamped %.3f): "
+                  "held again", self.robot_name, obstacle.uuid, since, obstacle.source, obstacle.version,
+                  obstacle.stamp)
 
     def _check_authority(self, obstacle, entry):
         """The receiver's caps (issue 27) on one message: its rectangle, its cells, its version.
@@ -524,9 +596,36 @@ class SharingHandler(MergingMixin, ManualMixin):
         verdict does not depend on the order messages arrive in and robots stay convergent;
         merges, which could join many messages' worth, are capped apart (_merge_fits)."""
         policy = self._policy
-        policy.check_extent(obstacle.rectangle)
-        policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "message")
+        creator = obstacle.source if entry is None else entry.source
+        policy.check_extent(obstacle.rectangle, "rectangle", creator)
+        policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "message", creator)
         policy.check_version(obstacle.version, 0 if entry is None else entry.max_version)
+        self._check_inside(obstacle, "message from %s" % obstacle.source)
+
+    def _check_inside(self, obstacle, what):
+        """Every cell of the message lies inside its rectangle, no more cells than it holds (issue 43)."""
+        g = self._geometry
+        check_cells_inside(obstacle.rectangle, obstacle.marked, obstacle.cleared, g.resolution, g.origin_x,
+                           g.origin_y, g.size_x, "%s %s v%d" % (what, obstacle.uuid or "(new)", obstacle.version))
+
+    def _reshare(self, update):
+        """This robot's layer marked cells of an obstacle that expired here (its tombstone stops peers'
+        late copies, not the robot that sees it): its marked cells become a new obstacle, shared like a
+        proposal, and the layer drops the expired uuid."""
+        proposal = update.replace(uuid="", version=0, cleared=(), source=self.robot_name, deadline=0)
+        try:
+            check_message_values(proposal)
+            self._check_grid(proposal)
+            self._policy.check_extent(proposal.rectangle, "rectangle", self.robot_name)
+            self._check_inside(proposal, "update")
+        except REFUSED as err:
+            self.reject(self.robot_name, update.uuid, err)
+            return None
+        self._counters["reshared"] += 1
+        _log.info("%s: obstacle %s expired here, but this robot sees %d of its cells occupied again: shared "
+                  "again as a new obstacle", self.robot_name, update.uuid, len(update.marked))
+        self._expired_out(update.uuid)
+        return self.on_proposal(proposal)
 
     def _check_grid(self, obstacle):
         if not self._geometry.matches(obstacle.geometry):

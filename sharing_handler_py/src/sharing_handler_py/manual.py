@@ -32,12 +32,9 @@ class ManualMixin:
                                 source=self.robot_name, geometry=self._geometry, frame_id=frame_id,
                                 stamp=self._clock())
             check_message_values(obstacle)  # the rectangle lies on the grid, the stamp is ROS time
-            width, height = rectangle.max_x - rectangle.min_x, rectangle.max_y - rectangle.min_y
-            if max(width, height) > self._max_extent:
-                # An obstacle blocks a pathway; a huge rectangle would make every later
-                # proposal under it redundant on every robot.
-                raise InvalidRequestError("rectangle %s is %g m x %g m, larger than max_obstacle_extent "
-                                          "%g m" % (rectangle, width, height, self._max_extent))
+            # An obstacle blocks a pathway; a huge rectangle would make every later proposal under it
+            # redundant on every robot. Shared under this robot's name, it gets a robot's cap everywhere.
+            self._policy.check_extent(rectangle, "rectangle", self.robot_name)
             marked = tuple(int(c) for c in marked) or self._geometry.cells_in(rectangle)
             if not marked:
                 raise InvalidRequestError("rectangle %s covers no cell of the map (%s)"
@@ -45,7 +42,8 @@ class ManualMixin:
             obstacle = obstacle.replace(marked=marked)
             check_message_values(obstacle)
             check_indexes(obstacle, self._geometry, self._max_cells)
-            self._policy.check_cells(len(marked), self._geometry, "rectangle %s" % rectangle)
+            self._policy.check_cells(len(marked), self._geometry, "rectangle %s" % rectangle, self.robot_name)
+            self._check_inside(obstacle, "manual obstacle")
         except REFUSED as err:
             raise InvalidRequestError(str(err)) from err
         self._counters["manual"] += 1

@@ -7,6 +7,12 @@ of both had been sent for the surviving uuid, and later messages for the absorbe
 the survivor. Rectangles only grow, so two obstacles once within merge_distance stay so, and every
 robot ends with the same merged obstacles whatever the order the messages came in. Merges stop at the
 caps (issue 27): two obstacles whose union would exceed them stay apart.
+
+Provenance (issue 43): only obstacles first shared by the same source merge (a merged obstacle never
+shows a source that did not send its cells; master control's areas never meet robots' obstacles), and
+a proposal becomes an update only of an obstacle this robot first shared. Who first shared an obstacle
+is known once its first share (version 1) has arrived; until then it merges with nothing, so the groups
+do not depend on the order messages arrive in.
 """
 import logging
 
@@ -22,15 +28,24 @@ class MergingMixin:
     rectangle grew or an obstacle was added."""
 
     def _near(self, rectangle, cells):
-        """The held obstacle (smallest uuid) whose rectangle overlaps `rectangle` or lies within
-        merge_distance of it and that stays within the caps with `cells` more, or None."""
+        """The held obstacle of this robot's (smallest uuid) whose rectangle overlaps `rectangle` or lies
+        within merge_distance of it and that stays within the caps with `cells` more, or None. Another
+        robot's obstacle is never one: this robot's cells under its name would show a source that did not
+        send them (issue 43)."""
         near = sorted(u for u in self._nearby.near(rectangle, self._merge_distance)
-                      if self._mergeable(self._entries[u].rectangle, rectangle))
+                      if self._first_shared_by(self._entries[u], self.robot_name)
+                      and self._mergeable(self._entries[u].rectangle, rectangle))
         for uuid in near:
             entry = self._entries[uuid]
-            if self._policy.fits(entry.rectangle.union(rectangle), len(entry.present) + cells, entry.geometry):
+            if self._policy.fits(entry.rectangle.union(rectangle), len(entry.present) + cells, entry.geometry,
+                                 entry.source):
                 return entry
         return None
+
+    @staticmethod
+    def _first_shared_by(entry, source):
+        """True when the first share (version 1) of the obstacle has arrived here and came from ``source``."""
+        return entry.first_key[0] == 1 and entry.source == source
 
     def _mergeable(self, a, b):
         """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the
@@ -76,6 +91,8 @@ class MergingMixin:
             self._nearby.put(uuid, entry.rectangle)
             near = sorted(u for u in self._nearby.near(entry.rectangle, self._merge_distance)
                           if u != uuid and u not in refused
+                          and self._first_shared_by(self._entries[u], entry.source)
+                          and self._first_shared_by(entry, entry.source)
                           and self._mergeable(self._entries[u].rectangle, entry.rectangle))
             if not near:
                 return uuid
@@ -92,16 +109,15 @@ class MergingMixin:
         """True when the union of two held obstacles stays within the caps; else counted and logged."""
         rectangle = a.rectangle.union(b.rectangle)
         cells = len(a.present) + len(b.present)
-        if cells > self._policy.cell_cap(a.geometry):
+        if cells > self._policy.cell_cap(a.geometry, a.source):
             cells = len(a.present | b.present)
-        if self._policy.fits(rectangle, cells, a.geometry):
+        if self._policy.fits(rectangle, cells, a.geometry, a.source):
             return True
         self._counters["merges_refused"] += 1
-        _log.warning("%s: obstacles %s %s (from %s) and %s %s (from %s) lie within merge_distance but "
-                     "are not merged: the union %s with %d cells exceeds max_obstacle_extent %g m or "
-                     "max_obstacle_cells %d", self.robot_name, a.uuid, a.rectangle, a.source, b.uuid,
-                     b.rectangle, b.source, rectangle, cells, self._policy.max_extent,
-                     self._policy.cell_cap(a.geometry))
+        _log.warning("%s: obstacles %s %s and %s %s (both from %s) lie within merge_distance but are not "
+                     "merged: the union %s with %d cells exceeds the extent cap %g m or max_obstacle_cells %d",
+                     self.robot_name, a.uuid, a.rectangle, b.uuid, b.rectangle, a.source, rectangle, cells,
+                     self._policy.extent_cap(a.source), self._policy.cell_cap(a.geometry, a.source))
         return False
 
     def _absorb(self, survivor_uuid, absorbed_uuid):

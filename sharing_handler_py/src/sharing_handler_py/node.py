@@ -13,6 +13,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
+from sharing_msgs.authority import FairQueue
 from sharing_msgs.safe_publisher import SafePublisher
 from sharing_msgs.srv import (AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse, RemoveObstacle,
                               RemoveObstacleResponse)
@@ -101,6 +102,8 @@ def read_params():
         source_update_rate=rospy.get_param("~source_update_rate", 100.0),
         source_update_burst=rospy.get_param("~source_update_burst", 2000),
         list_cost_share=rospy.get_param("~list_cost_share", 0.05),
+        max_sensor_reach=rospy.get_param("~max_sensor_reach", 4.0),
+        source_queue_size=rospy.get_param("~source_queue_size", 200),
     )
 
 
@@ -135,6 +138,10 @@ class HandlerNode:
         # RViz: the fleet's obstacles with source, age, time left and cells (markers.py), on every change and
         # at each tick (the ages move)
         self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1, latch=True)
+        # Fleet messages wait in a queue per source, served round-robin by one worker (issue 43, item 5): a
+        # login flooding valid obstacles fills only its own queue, and another robot's message waits for at
+        # most one of its messages, not for the flood (rospy's own queue drops the oldest, whoever sent it).
+        self._fleet_inbox = FairQueue(params.source_queue_size)
         self.handler = SharingHandler(
             params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
             on_to_layer=lambda o: self._deliver(self._pub_layer, o),
@@ -149,12 +156,15 @@ class HandlerNode:
             max_clock_skew=params.clock_skew,
             max_obstacles_per_source=params.max_obstacles_per_source,
             source_update_rate=params.source_update_rate,
-            source_update_burst=params.source_update_burst)
+            source_update_burst=params.source_update_burst,
+            max_sensor_reach=params.max_sensor_reach)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
         rospy.Subscriber("obstacle_updates", SharedObstacle, self._on_update, queue_size=1000)
         rospy.Subscriber("from_fleet", SharedObstacle, self._on_fleet, queue_size=1000)
+        # copies restoring state (the bridge's Discover answers, its copy for a restarted handler): never renewals
+        rospy.Subscriber("fleet_state", SharedObstacle, self._on_fleet_state, queue_size=1000)
         rospy.Service("list_obstacles", ListObstacles, self._on_list)
         rospy.Service("add_obstacle", AddObstacle, self._on_add)
         rospy.Service("remove_obstacle", RemoveObstacle, self._on_remove)
@@ -200,10 +210,32 @@ class HandlerNode:
                 self.handler.on_internal_update(obstacle)
 
     def _on_fleet(self, msg):
-        obstacle = self._convert(msg, "from_fleet")
-        if obstacle is not None:
+        self._queue_fleet(msg, "from_fleet", True)
+
+    def _on_fleet_state(self, msg):
+        self._queue_fleet(msg, "fleet_state", False)
+
+    def _queue_fleet(self, msg, topic, live):
+        """rospy's thread: converts and queues behind the message's source (fair delivery); the worker applies."""
+        obstacle = self._convert(msg, topic)
+        if obstacle is None:
+            return
+        if not self._fleet_inbox.put(obstacle.source, (obstacle, live)):
             with self._lock:
-                self.handler.on_external(obstacle)
+                self.handler.queue_full(obstacle)
+
+    def serve_fleet(self, stop):
+        """The worker: applies queued fleet messages, one source at a time in turn, until ``stop`` is set."""
+        while not stop.is_set():
+            item = self._fleet_inbox.get(timeout=0.5)
+            if item is None:
+                continue
+            obstacle, live = item[1]
+            with self._lock:
+                if live:
+                    self.handler.on_external(obstacle)
+                else:
+                    self.handler.on_state(obstacle)
 
     def _on_map(self, grid):
         try:
@@ -384,6 +416,9 @@ def main(argv=None):
         rospy.logfatal(message)
         print(message, file=sys.stderr)
         sys.exit(2)
-    HandlerNode(params)
+    node = HandlerNode(params)
+    stop = threading.Event()
+    rospy.on_shutdown(stop.set)
+    threading.Thread(target=node.serve_fleet, args=(stop,), name="sharing_handler fleet inbox", daemon=True).start()
     publisher_links.start_watch(rospy.get_name())
     rospy.spin()
