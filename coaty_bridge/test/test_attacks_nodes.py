@@ -1,7 +1,7 @@
 """Issue 27's attacks 1-10 against real nodes, in the secure default (issue 27, first "Done when").
 
 One private rosmaster, `run_broker` as the fleet launch starts it (per-robot logins, ACL on sourceId,
-client id = login, no anonymous logins), and three robots, each a real `sharing_handler` node and a
+no anonymous logins), and three robots, each a real `sharing_handler` node and a
 real `coaty_bridge` node with the parameters robot.launch gives them (`obstacle_duration` 1200;
 `authenticate_sources`, `password_file`, ... as in test_secure_default.launch_bridge_params).
 `fleet_probe.py` plays the map server, calls `add_obstacle` and watches every handler's
@@ -115,8 +115,7 @@ class NodeFleet:
         self.good = self._share_good()
 
     def connect_attacker(self):
-        """(Re)connects the attacker under robot_3's login. The broker makes the login its client id, so
-        another connection under the same login (attack 5) takes this one's place."""
+        """(Re)connects the attacker under robot_3's login."""
         self.attacker = Peer(self.port, *self.creds.login(ATTACKER))
         self.peers.append(self.attacker)
         wait_until(self.attacker.settled, "the attacker's login")
@@ -389,8 +388,9 @@ def test_attack_4_a_discover_flood_is_rate_limited(fleet):
 # ------------------------------------------------------------------------------ attack 5
 
 def test_attack_5_a_robots_client_id_cannot_be_taken_over(fleet):
-    """Stopped at the broker: the client id is the login, so robot_3's login connecting under robot_0's
-    client id gets its own login as id, and without robot_0's password nobody logs in as robot_0."""
+    """Stopped at the broker and by what the logs do not show: robot_0's log shows its client id without the
+    nonce (a different id), its identity is another id than the one it uses, and without robot_0's password
+    nobody logs in as robot_0. (A second connection under a robot's own login: test_attacks_43_nodes.py.)"""
     victim = identity_for(NS, "robot_0")
     client_id = fleet.logs["robot_0"].find("MQTT client id")[0].split("MQTT client id ", 1)[1].split(",", 1)[0]
     before = fleet.snapshot()

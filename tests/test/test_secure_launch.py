@@ -203,7 +203,7 @@ def test_running_fleet_launch_refuses_anonymous_forged_sources_and_client_id_tak
         time.sleep(0.3)
         assert forged_topic not in watcher.received, "an event under robot_0's sourceId got through"
         robot_1.close()
-        # (c) robot_0's client id (= its login) without its password
+        # (c) robot_0's login as client id, without its password
         deadverts = "coaty/3/%s/DAD/%s" % (NS, ids["robot_0"])
         before = len(heartbeats("robot_0"))
         for kwargs in (dict(client_id=ids["robot_0"]), dict(client_id=ids["robot_0"], username=ids["robot_0"],

@@ -19,7 +19,7 @@ import ssl
 import threading
 import time
 
-from coaty_bridge import codec, renewals
+from coaty_bridge import codec, logins, renewals
 from coaty_bridge import liveness as liveness_rules
 from coaty_bridge.config import (BridgeConfig, BrokerAddress, BrokerUrlChoice, choose_broker_url,  # noqa: F401
                                  parse_broker_url)
@@ -116,6 +116,8 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         self._footprint_topic = str(Topic(ns, "ADV", self.identity_id, object_type=config.footprint_object_type))
         self._dad_topic = str(Topic(ns, "DAD", self.identity_id))
         self._renewals_topic = str(Topic(ns, "CHN", self.identity_id, filter=renewals.CHANNEL))
+        self.client_id = mqtt_client_id(self.identity_id)
+        self.login_alerts = logins.LoginAlerts(config.robot_name, self.client_id, clock)
         self._subscriptions = [
             (subscription(ns, "ADV::" + config.object_type), qos),
             (subscription(ns, "ADV::" + config.footprint_object_type), qos),
@@ -127,6 +129,8 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
             # agents' Identity adverts (one per connection): which robot a Discover comes from
             (subscription(ns, "ADV:" + codec.IDENTITY_CORE_TYPE), qos),
             (self._echo_topic, qos),
+            # run_broker's alerts about other connections under this robot's login (logins.py)
+            (subscription(ns, "CHN:" + logins.channel(self.identity_id)), qos),
         ]
         # Footprint and obstacle areas heard now (the 3 x 3 around the own robot, each at its own size);
         # none until the robot's position is known.
@@ -141,12 +145,12 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         # those copies would expire while the robots near the obstacle hold it longer.
         self._fleet_expiry = {}
         self._renewals = {}
-        self.client_id = mqtt_client_id(self.identity_id)
         self._mqtt = _make_paho_client(self.client_id)
         self._mqtt.will_set(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=0)
         if config.use_tls:
             self._mqtt.tls_set(ca_certs=config.tls_ca or None, certfile=config.tls_cert or None,
                                keyfile=config.tls_key or None, cert_reqs=ssl.CERT_REQUIRED)
+        self._password = config.password
         if config.username:
             self._mqtt.username_pw_set(config.username, config.password or None)
         self._mqtt.reconnect_delay_set(min_delay=config.reconnect_min_delay,

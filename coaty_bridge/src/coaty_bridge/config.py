@@ -52,6 +52,9 @@ class BridgeConfig:
     tls_key: str = ""
     username: str = ""
     password: str = ""
+    # where the password came from: read again before each connection attempt, so a secret rotated while the
+    # fleet runs (fleet_credentials rotate) is used on the next reconnect (issue 43, item 9)
+    password_file: str = ""
     max_payload_bytes: int = 1024 * 1024
     max_indexes: int = 1_000_000
     # the handler's caps on one obstacle (same meaning, same defaults): checked before expanding
@@ -165,7 +168,7 @@ class BridgeConfig:
             fail("broker_url", "plain MQTT to %s, which is not this machine: the login and every obstacle would "
                                "cross the network in clear text; use mqtts:// (tls_ca, and tls_cert/tls_key or a "
                                "password), or set insecure: true to accept the risk" % self.address.host)
-        for name in ("tls_ca", "tls_cert", "tls_key", "username", "password"):
+        for name in ("tls_ca", "tls_cert", "tls_key", "username", "password", "password_file"):
             if not isinstance(getattr(self, name), str):
                 fail(name, "not a string")
         if bool(self.tls_cert) != bool(self.tls_key):

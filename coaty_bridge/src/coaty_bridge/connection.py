@@ -24,11 +24,18 @@ def mqtt_client_id(identity_id, nonce=None):
     authenticate_sources, computable from the robot's name), so an id made of it alone let any
     peer connect under it and make the broker drop the robot (issue 27, attack 5: 19 s cut off).
     The bridge connects with a clean session (nothing persists under the id), so a fresh id per
-    start costs nothing; it stays the same across reconnects of one start. With per-robot logins
-    the broker also binds the id to the login (``use_username_as_clientid true``, README)."""
+    start costs nothing; it stays the same across reconnects of one start. The broker does not make
+    the login the client id (issue 43, item 6: a second connection under a robot's login then took the
+    robot off the broker), so the nonce is what keeps the id from others: it is never logged
+    (``masked_client_id``)."""
     if nonce is None:
         nonce = secrets.token_hex(5)
     return "Coaty" + identity_id.replace("-", "")[:8] + nonce
+
+
+def masked_client_id(client_id):
+    """The client id as logged: its nonce hidden, so a log reader cannot take the connection over."""
+    return client_id[:13] + "*" * max(0, len(client_id) - 13)
 
 
 def _make_paho_client(client_id):
@@ -150,8 +157,29 @@ class ConnectionMixin:
                     self.config.broker_url_source, queued, self.config.reconnect_max_delay)
         return True
 
+    def _refresh_password(self):
+        """Reads password_file again before the next attempt: a secret rotated while the fleet runs (fleet_credentials
+        rotate) is the one the broker knows now."""
+        path = self.config.password_file
+        if not path or not self.config.username:
+            return
+        try:
+            with open(path) as handle:
+                secret = handle.readline().rstrip("\r\n")
+        except OSError as err:
+            LOG.warning("%s: cannot read password_file %s (%s); trying the secret read before",
+                        self.config.robot_name, path, err.strerror or err)
+            return
+        if secret and secret != self._password:
+            self._password = secret
+            self._mqtt.username_pw_set(self.config.username, secret)
+            self._count("password_reloaded")
+            LOG.info("%s: password_file %s changed; the next connection uses the new secret", self.config.robot_name,
+                     path)
+
     def _on_connect_fail(self, client, userdata):
         """paho: a connection attempt failed (nothing listens, no route, TLS handshake, ...)."""
+        self._refresh_password()
         with self._lock:
             self._counters["connect_failures"] += 1
             self._failed_attempts += 1
@@ -159,6 +187,7 @@ class ConnectionMixin:
 
     def _on_connect(self, client, userdata, flags, rc, properties=None):
         if rc != 0:
+            self._refresh_password()
             with self._lock:
                 self._counters["connect_failures"] += 1
                 self._failed_attempts += 1
@@ -207,6 +236,7 @@ class ConnectionMixin:
                 self._subscribed = True
 
     def _on_disconnect(self, client, userdata, rc, properties=None):
+        self._refresh_password()
         with self._lock:
             self._connected = False
             self._subscribed = False

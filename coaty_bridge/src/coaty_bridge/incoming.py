@@ -6,7 +6,7 @@ import logging
 import select
 import time
 
-from coaty_bridge import areas, codec, footprint as footprints, renewals
+from coaty_bridge import areas, codec, footprint as footprints, logins, renewals
 from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, ReservedSourceError,
                                  UnknownRobotError, WrongTypeError)
 from coaty_bridge.identity import identity_for
@@ -125,6 +125,9 @@ class IncomingMixin:
             if topic.event == "CHN" and topic.filter == ECHO_CHANNEL and topic.namespace == self._echo_namespace:
                 self._on_echo(topic, payload)
                 return
+            if topic.event == "CHN" and topic.filter == logins.channel(self.identity_id):
+                self._on_login_alert(topic, payload)
+                return
             if topic.source_id == self.identity_id:
                 self._count("echoes_suppressed")
                 return
@@ -170,6 +173,20 @@ class IncomingMixin:
                 self._count("ignored")
         except CoatyError as err:
             self._drop(err, topic_text, payload)
+
+    def _on_login_alert(self, topic, payload):
+        """run_broker says another connection uses this robot's login (logins.py); only its own login may say so."""
+        if topic.source_id != identity_for(self.config.namespace, logins.BROKER_LOGIN_NAME):
+            raise ForgedSourceError("login alert for %s sent by %s, not by the broker's login"
+                                    % (self.config.robot_name, topic.source_id))
+        alert = logins.LoginAlert.from_payload(codec.parse_payload(payload, self.config.limits))
+        others = self.login_alerts.note(alert)
+        self._count("login_alerts")
+        if others:
+            LOG.warning("%s: another connection under this robot's login %s: client id %s from %s (connected now: %s); "
+                        "if it is not this robot, its secret has leaked: rotate it (rosrun coaty_bridge fleet_credentials "
+                        "rotate %s)", self.config.robot_name, alert.login, alert.client_id, alert.address,
+                        ", ".join(others), self.config.robot_name)
 
     def _is_pending(self, correlation_id):
         with self._lock:

@@ -22,6 +22,7 @@ from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_url
+from coaty_bridge.connection import masked_client_id
 from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
@@ -194,6 +195,7 @@ def read_config():
             kwargs["password"] = read_password_file(password_file)
         except ValueError as err:
             raise ValueError("parameter %s" % err) from None
+        kwargs["password_file"] = password_file
     try:
         config = BridgeConfig(robot_name=robot_name, broker_url=choice.url, broker_url_source=choice.source,
                               **kwargs)
@@ -265,7 +267,7 @@ class BridgeNode:
                       "MQTT client id %s, login %s%s",
                       self.config.robot_name, self.client.identity_id, self.config.broker_url,
                       self.config.broker_url_source, self.config.namespace, self.config.object_type,
-                      self.client.client_id, self.config.username or "anonymous",
+                      masked_client_id(self.client.client_id), self.config.username or "anonymous",
                       ", authenticated sources" if self.config.authenticate_sources else "")
         if self.config.insecure:
             rospy.logwarn("%s: coaty_bridge: INSECURE (insecure:=true)%s: %s", self.config.robot_name,
@@ -436,12 +438,17 @@ class BridgeNode:
         counters["publishers_repaired"] = self.from_fleet.repaired
         counters["publishers_recreated"] = self.from_fleet.recreated
         flood = self._new_source_drops(counters)
+        login_level, login_problem = self.client.login_alerts.status()
         if level == safe_publisher.ERROR:
             status.level = DiagnosticStatus.ERROR
             status.message = problem
         elif level == safe_publisher.WARN:
             status.level = DiagnosticStatus.WARN
             status.message = problem
+        elif login_level:
+            # another connection under this robot's login (issue 43, item 6): WARN once, ERROR when repeated
+            status.level = DiagnosticStatus.ERROR if login_level >= 2 else DiagnosticStatus.WARN
+            status.message = login_problem
         elif flood:
             # a flooding sender (issue 27, item 3) or one claiming what it could not see (issue 43): name it
             status.level = DiagnosticStatus.WARN
