@@ -15,7 +15,6 @@ agent's state and keeps the names callers import from it (BridgeConfig, choose_b
 """
 import collections
 import logging
-import ssl
 import threading
 import time
 
@@ -147,9 +146,12 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         self._renewals = {}
         self._mqtt = _make_paho_client(self.client_id)
         self._mqtt.will_set(self._dad_topic, codec.deadvertise_payload([self.identity_id]), qos=0)
-        if config.use_tls:
-            self._mqtt.tls_set(ca_certs=config.tls_ca or None, certfile=config.tls_cert or None,
-                               keyfile=config.tls_key or None, cert_reqs=ssl.CERT_REQUIRED)
+        # TLS files are checked before paho gets them (connection.py): an absent, unreadable or expired one is
+        # named with what to do, and the bridge checks again until it is right
+        self.tls_problem = None
+        self._tls_ready = not config.use_tls
+        self._tls_checked_at = None
+        self._network_started = False
         self._password = config.password
         if config.username:
             self._mqtt.username_pw_set(config.username, config.password or None)

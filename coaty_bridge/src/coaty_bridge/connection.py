@@ -4,11 +4,13 @@ client id, and the watch that WARNs while the broker cannot be reached. A part o
 import logging
 import secrets
 import socket
+import ssl
 import threading
 
 import paho.mqtt.client as mqtt
 
 from coaty_bridge import codec
+from sharing_msgs import tls_files
 from coaty_bridge.topics import Topic
 
 LOG = logging.getLogger("coaty_bridge.client")
@@ -48,14 +50,13 @@ class ConnectionMixin:
     """Lifecycle, counters and the broker connection of CoatyBridgeClient."""
 
     def start(self):
-        """Connects in the background; reconnects with backoff until stop()."""
-        address = self.config.address
+        """Connects in the background; reconnects with backoff until stop(). With TLS files that are absent,
+        unreadable or expired it says which and what to do, and checks again until they are right."""
         with self._lock:
             self._down_since = self._clock()
-        self._mqtt.connect_async(address.host, address.port, keepalive=self.config.keepalive)
         self._inbox_thread = threading.Thread(target=self._serve_inbox, name="coaty_bridge inbox", daemon=True)
         self._inbox_thread.start()
-        self._mqtt.loop_start()
+        self._start_network()
         # check_broker on a wall-clock second: the MQTT thread sleeps in its backoff, and ROS time may stand
         self._watch_thread = threading.Thread(target=self._watch_broker, name="coaty_bridge broker watch",
                                               daemon=True)
@@ -121,9 +122,71 @@ class ConnectionMixin:
         with self._lock:
             self._counters[key] += n
 
+    def _check_tls(self):
+        """True when the TLS files are right (or TLS is off); else the problem is logged (ERROR, once per change, and
+        every 10 min while it lasts) and kept for /diagnostics (issue 43, item 9)."""
+        config = self.config
+        if not config.use_tls:
+            return True
+        problem = tls_files.tls_problem(config.tls_ca, config.tls_cert, config.tls_key)
+        self._tls_checked_at = self._clock()
+        if problem is None:
+            if self.tls_problem is not None:
+                LOG.info("%s: the TLS files are right now; connecting to %s", config.robot_name, config.broker_url)
+            self.tls_problem = None
+            return True
+        if problem != self.tls_problem or self._count_and_get("tls_problem_reports") % 60 == 0:
+            LOG.error("%s: not connecting to %s: %s", config.robot_name, config.broker_url, problem)
+        self.tls_problem = problem
+        return False
+
+    def _count_and_get(self, key):
+        with self._lock:
+            self._counters[key] += 1
+            return self._counters[key]
+
+    def _start_network(self):
+        """Hands the TLS files to paho and starts its network thread, once they are right."""
+        if self._network_started or not self._check_tls():
+            return False
+        config = self.config
+        if config.use_tls and not self._tls_ready:
+            try:
+                self._mqtt.tls_set(ca_certs=config.tls_ca or None, certfile=config.tls_cert or None,
+                                   keyfile=config.tls_key or None, cert_reqs=ssl.CERT_REQUIRED)
+            except (ssl.SSLError, OSError, ValueError) as err:
+                self.tls_problem = "the TLS files could not be loaded (%s); tls_ca %r, tls_cert %r, tls_key %r" % (
+                    err, config.tls_ca, config.tls_cert, config.tls_key)
+                LOG.error("%s: not connecting to %s: %s", config.robot_name, config.broker_url, self.tls_problem)
+                return False
+            self._tls_ready = True
+        address = config.address
+        self._mqtt.connect_async(address.host, address.port, keepalive=config.keepalive)
+        self._mqtt.loop_start()
+        self._network_started = True
+        return True
+
+    def _keep_network_alive(self):
+        """paho's network thread can die on an exception it does not expect (issue 43: an expired certificate ended
+        it and the bridge only said "unreachable"): say why, and start it again."""
+        thread = getattr(self._mqtt, "_thread", None)   # paho's own; None before loop_start and after loop_stop
+        if not self._network_started or self._stopping or thread is None or thread.is_alive():
+            return
+        self._count("network_thread_restarts")
+        self._check_tls()
+        LOG.error("%s: the MQTT network thread ended%s; starting it again", self.config.robot_name,
+                  ": " + self.tls_problem if self.tls_problem else "")
+        self._mqtt.loop_stop()
+        self._mqtt.loop_start()
+
     def _watch_broker(self):
         while not self._watch_stop.wait(1.0):
             try:
+                if not self._network_started:
+                    if self._tls_checked_at is None or self._clock() - self._tls_checked_at >= tls_files.RETRY_INTERVAL:
+                        self._start_network()
+                else:
+                    self._keep_network_alive()
                 with self._source_drops_lock:
                     self._source_drops.flush(self._clock())
                 self.check_broker()
@@ -153,8 +216,9 @@ class ConnectionMixin:
             attempts, queued = self._failed_attempts, len(self._queue)
         LOG.warning("%s: broker %s unreachable for %.0f s (%d connection attempts failed; broker_url from %s); "
                     "not in the fleet: nothing is shared or received, %d obstacle updates queued; retrying "
-                    "every %g s at most", self.config.robot_name, self.config.broker_url, down_for, attempts,
-                    self.config.broker_url_source, queued, self.config.reconnect_max_delay)
+                    "every %g s at most%s", self.config.robot_name, self.config.broker_url, down_for, attempts,
+                    self.config.broker_url_source, queued, self.config.reconnect_max_delay,
+                    "; the reason is likely: " + self.tls_problem if self.tls_problem else "")
         return True
 
     def _refresh_password(self):
@@ -180,6 +244,8 @@ class ConnectionMixin:
     def _on_connect_fail(self, client, userdata):
         """paho: a connection attempt failed (nothing listens, no route, TLS handshake, ...)."""
         self._refresh_password()
+        if self.config.use_tls:
+            self._check_tls()   # a certificate that expired since: say so, not only "unreachable"
         with self._lock:
             self._counters["connect_failures"] += 1
             self._failed_attempts += 1
