@@ -19,6 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point32, PolygonStamped
 from sharing_msgs.msg import RobotFootprint, RobotFootprintArray, SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
+from sharing_msgs.authority import MASTER_CONTROL
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_url
@@ -393,6 +394,10 @@ class BridgeNode:
     def _on_obstacle_list(self, msg):
         updates = []
         for item in msg.obstacles:
+            if item.source == MASTER_CONTROL:
+                # master control tells every robot its areas itself; answered by a robot they would go out under
+                # that robot's name (issue 43, item 2)
+                continue
             if not item.marked_indexes:
                 # An obstacle emptied by raytracing draws nothing on a late joiner; a fleet
                 # message without cells is refused by every receiver anyway.
@@ -445,6 +450,10 @@ class BridgeNode:
         elif level == safe_publisher.WARN:
             status.level = DiagnosticStatus.WARN
             status.message = problem
+        elif self.client.tls_problem and not self.client.connected:
+            # an absent, unreadable or expired certificate or key (issue 43, item 9): which file, what, what to do
+            status.level = DiagnosticStatus.ERROR
+            status.message = "not connected to %s: %s" % (self.config.broker_url, self.client.tls_problem)
         elif login_level:
             # another connection under this robot's login (issue 43, item 6): WARN once, ERROR when repeated
             status.level = DiagnosticStatus.ERROR if login_level >= 2 else DiagnosticStatus.WARN
