@@ -238,7 +238,10 @@ class FleetCredentials:
         fd, staged = tempfile.mkstemp(dir=directory, prefix=".passwords_")   # mode 0600
         with os.fdopen(fd, "w") as out:
             for robot in robots:
-                out.write("%s:%s\n" % self.login(robot))
+                username, secret = self.login(robot)
+                out.write("%s:%s\n" % (username, secret))
+                # the robot's VDA 5050 login: its name (its serial number there), the same secret
+                out.write("%s:%s\n" % (robot, secret))
             out.write("%s:%s\n" % (MONITOR, read_password_file(self.monitor_password_file)))
             out.write("%s:%s\n" % self.broker_login())
             out.write("%s:%s\n" % (MASTER_CONTROL_LOGIN, read_password_file(self.master_control_password_file)))

@@ -71,7 +71,7 @@ from sharing_handler_py.nearby import RectangleIndex
 from sharing_handler_py.validation import Geometry, check_fleet_message, check_message_values, check_uuid, \
     check_indexes
 from sharing_msgs import obstacle_rules
-from sharing_msgs.authority import DropReport, PeerPolicy, SourceQuotas, check_cells_inside
+from sharing_msgs.authority import MASTER_CONTROL, DropReport, PeerPolicy, SourceQuotas, check_cells_inside
 
 _log = logging.getLogger(__name__)
 
@@ -118,7 +118,8 @@ EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_ou
                   "state_copies",      # copies restoring state (on_state): applied, never a renewal
                   "revived",           # a tombstoned obstacle observed again after its tombstone
                   "reshared",          # this robot's layer marked cells of an expired obstacle: a new share
-                  "clears_kept_lease")  # a message marking nothing left the lease as it was (issue 43)
+                  "clears_kept_lease",  # a message marking nothing left the lease as it was (issue 43)
+                  "master_control_updates_not_shared")  # the layer's view of master control's area stays here
 
 def _noop(*_args):
     pass
@@ -303,6 +304,12 @@ class SharingHandler(MergingMixin, ManualMixin):
                                           "handler does not hold" % obstacle.uuid)
             if self._geometry is None:
                 raise InvalidMessageError("no_geometry", "no grid known yet")
+            if entry.source == MASTER_CONTROL:
+                # master control tells every robot its areas itself; this robot's view of one would go out under
+                # this robot's name (issue 43, item 2)
+                self._counters["master_control_updates_not_shared"] += 1
+                _log.debug("%s: layer update of master control's area %s not shared", self.robot_name, obstacle.uuid)
+                return None
             check_message_values(obstacle)
             self._check_grid(obstacle)
             if entry.expires_at - self._clock() < 1.0:

@@ -17,10 +17,10 @@ import math
 import uuid as uuidlib
 from collections import Counter, namedtuple
 
-from sharing_msgs.authority import AuthorityError, PeerPolicy
+from sharing_msgs.authority import MASTER_CONTROL, AuthorityError, PeerPolicy
 from vda5050_bridge import schemas
 
-MASTER_SOURCE = "master_control"
+MASTER_SOURCE = MASTER_CONTROL   # the source of master control's areas (sharing_msgs.authority)
 ERROR_TYPE = "fleetObstacleOnPath"
 BLOCK_ACTION = "fleetBlockArea"
 UNBLOCK_ACTION = "fleetUnblockArea"
