@@ -181,3 +181,39 @@ def test_renewals_count_only_live_observations():
 def test_the_grid_of_the_fixtures_is_the_one_the_cells_are_drawn_on():
     # (guards the helpers above: a cell index means a place only on its grid)
     assert cell_in(rect(0, 0, 1, 1), 0) == GRID.cells_in(rect(0, 0, 1, 1))[0]
+
+
+def test_a_copy_restoring_state_never_changes_who_first_shared_an_obstacle():
+    """A Discover answer goes out under the answering robot's name (coaty_bridge README, authenticated sources): a
+    version-1 copy of robot_1's obstacle from robot_0 made robot_0 its creator on robot_1, and robot_1's next
+    proposal beside it became an obstacle of its own there while the others merged it (found by
+    tests/test/test_fleet_crashes.py after a bridge restart)."""
+    r = Recorder("robot_1", duration=1200, max_sensor_reach=REACH)
+    mine = r.handler.on_proposal(proposal(cells=cells_in(rect(0, 0, 0.3, 0.1), 2), rectangle=rect(0, 0, 0.3, 0.1),
+                                          source="robot_1"))
+    copy = mine.replace(source="robot_0", stamp=100.0)
+    assert r.handler.on_state(copy)
+    assert r.handler.get(mine.uuid).source == "robot_1"
+    beside = r.handler.on_proposal(proposal(cells=cells_in(rect(0.5, 0, 0.8, 0.1), 2), rectangle=rect(0.5, 0, 0.8, 0.1),
+                                            source="robot_1"))
+    assert beside.uuid == mine.uuid and beside.version == 2, "robot_1's proposal beside its own obstacle updates it"
+    # an obstacle known only from copies has no known creator: it merges with nothing
+    other = Recorder("robot_2", duration=1200, max_sensor_reach=REACH)
+    assert other.handler.on_state(copy)
+    assert not other.handler._entries[mine.uuid].creator_known
+
+
+def test_after_a_restart_the_robots_own_updates_handed_back_say_it_first_shared_them():
+    """A restarted handler gets its obstacles back as copies under its peers' names (creator unknown) and its own
+    updates from its bridge (under its own name): those make it the creator again, so its next proposal beside one
+    updates it as on every other robot."""
+    r = Recorder("robot_2", duration=1200, max_sensor_reach=REACH)
+    area = rect(0, 0, 0.3, 0.1)
+    first_share = update(U("mine"), marked=cells_in(area, 2), version=1, source="robot_2", rectangle=area, stamp=100.0)
+    assert r.handler.on_state(first_share.replace(source="robot_0"))        # a peer's copy comes first
+    assert not r.handler._entries[U("mine")].creator_known
+    assert r.handler.on_state(first_share)                                  # then its own, from its bridge
+    assert r.handler.get(U("mine")).source == "robot_2" and r.handler._entries[U("mine")].creator_known
+    beside = r.handler.on_proposal(proposal(cells=cells_in(rect(0.5, 0, 0.8, 0.1), 2), rectangle=rect(0.5, 0, 0.8, 0.1),
+                                            source="robot_2"))
+    assert beside.uuid == U("mine")

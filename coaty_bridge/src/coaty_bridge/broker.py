@@ -34,6 +34,17 @@ def _keep_user():
     return "user %s\n" % pwd.getpwuid(os.geteuid()).pw_name
 
 
+def _die_with_parent():
+    """In the child before exec: mosquitto gets SIGTERM when the process that started it dies, even by SIGKILL, so a
+    killed run_broker leaves no mosquitto holding the fleet's port for the one started again (Linux's
+    PR_SET_PDEATHSIG; elsewhere nothing)."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
+
+
 class BrokerError(RuntimeError):
     """mosquitto could not be started."""
 
@@ -105,7 +116,7 @@ class Broker:
                 for line in extra:
                     out.write(line + "\n")
             self._proc = subprocess.Popen([self.binary, "-c", conf], stdin=subprocess.DEVNULL,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=_die_with_parent)
             if self._wait_ready():
                 return self
             last = self._failure_text()
@@ -143,7 +154,7 @@ class Broker:
         deadline = time.monotonic() + self.start_timeout
         while True:   # the old socket may linger in TIME_WAIT for a moment
             self._proc = subprocess.Popen([self.binary, "-c", conf], stdin=subprocess.DEVNULL,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=_die_with_parent)
             if self._wait_ready():
                 return self
             text = self._failure_text()

@@ -36,6 +36,9 @@ from sharing_msgs.authority import DropReport, FairQueue, PoseHistory, TokenBuck
 
 LOG = logging.getLogger(__name__)
 
+#: this robot's recent footprints kept as evidence (2 Hz and more: the last minute or so)
+OWN_FOOTPRINTS_KEPT = 128
+
 
 class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, IncomingMixin, DiscoveryMixin, EvidenceMixin):
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
@@ -52,12 +55,14 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         # series or of its agent: stopped, or its navigation went quiet), so it is forgotten at once
         self._on_footprint_withdrawn = on_footprint_withdrawn
         self._footprint_senders = {}   # sourceId -> (robot, advert objectId) of footprints heard
-        # plausible evidence (evidence.py): what each peer advertised, this robot's latest footprint and the last
-        # evidence advert sent (time, points, stamp)
+        # plausible evidence (evidence.py): what each peer advertised, and this robot's latest footprint
         self._poses = PoseHistory(config.evidence_rule)
-        self._own_footprint = None
-        self._last_evidence = None
+        self._own_footprints = collections.deque(maxlen=OWN_FOOTPRINTS_KEPT)
         self._evidence_warned = None
+        # obstacle messages kept back until this robot's first footprint (evidence.py); only for a robot that
+        # advertises its footprint (the node says so: expect_footprints)
+        self._awaiting_evidence = []
+        self._expect_footprints = False
         self.footprint_object_id = new_uuid()
         self._clock = clock
         self._qos = qos

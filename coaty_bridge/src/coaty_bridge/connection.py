@@ -192,6 +192,7 @@ class ConnectionMixin:
                 self.check_broker()
                 if self._connected:
                     self.renew_due()
+                self.release_unevidenced()
             except Exception as err:  # noqa: BLE001 - a log problem must not end the watch
                 LOG.error("%s: broker watch: %s: %s", self.config.robot_name, type(err).__name__, err)
 

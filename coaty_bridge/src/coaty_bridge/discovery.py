@@ -31,6 +31,19 @@ class DiscoveryMixin:
             self._current = current
             self._current_as_of = as_of
 
+    def restore(self):
+        """The robot's handler started again (issue 43, item 8): asks the fleet for its obstacles again (the answers
+        go to it as state, not renewals) and returns this robot's own updates still alive, aged to now, for the node
+        to hand over at once (its peers hold those too, but this robot may have none). Nothing while offline: the
+        next connect asks anyway."""
+        if not self._connected:
+            return []
+        self._discover_obstacles()
+        self._count("restores")
+        LOG.info("%s: a new subscriber of the fleet's obstacles (the handler started again?): asked the fleet for its "
+                 "obstacles again", self.config.robot_name)
+        return self._replayable_own_updates()
+
     def _discover_obstacles(self, object_types=None):
         correlation_id = new_uuid()
         now = self._clock()

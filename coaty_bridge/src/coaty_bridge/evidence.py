@@ -2,9 +2,9 @@
 sharing_msgs README, "Plausible evidence"). A part of CoatyBridgeClient (client.py).
 
 Out: this robot's footprint adverts carry its sensor ``reach``, and before each obstacle message the bridge
-makes sure every peer has heard a pose of it near the message's stamp: an advert under the plain footprint
-objectType (heard fleet-wide, whatever the footprint areas), at most one per EVIDENCE_INTERVAL unless the
-robot moved.
+sends its footprint taken near the message's stamp under the plain footprint objectType (heard fleet-wide,
+whatever the footprint areas, and by a bridge started again since the last one); a message waits for such a
+footprint up to EVIDENCE_WAIT s.
 In: every footprint advert a bridge accepts is a sighting of that robot; with ``require_evidence`` a peer's
 obstacle message (an Advertise or a renewal, not a Resolve restoring state) keeps only the cells within the
 peer's reach of a sighting covering its stamp, and one with none left is dropped. Both are counted per
@@ -13,54 +13,100 @@ sender and named in /diagnostics.
 import dataclasses
 import logging
 
-from coaty_bridge import footprint as footprints
+from coaty_bridge import footprint as footprints, lifetimes
 from sharing_msgs.authority import Sighting
 
 LOG = logging.getLogger("coaty_bridge.client")
 
-#: s between two evidence adverts while the robot stands still (a moved robot sends one at once).
-EVIDENCE_INTERVAL = 1.0
-#: m a robot moves before its next obstacle message brings a new evidence advert.
-EVIDENCE_MOVE = 0.1
-#: s an own footprint is evidence for after it arrived (the footprint topic's robot_timeout).
-OWN_FOOTPRINT_MAX_AGE = 3.0
+#: s an obstacle message waits for this robot's first footprint (a robot sharing before its navigation publishes
+#: one, at start-up) before it goes out without evidence
+EVIDENCE_WAIT = 5.0
 
 
 class EvidenceMixin:
     """Sightings, evidence adverts and judgements of CoatyBridgeClient."""
 
     def note_own_footprint(self, footprint):
-        """This robot's latest footprint at its pose (the node calls it for every one it gets): the evidence
-        sent before its obstacle messages."""
+        """This robot's latest footprint at its pose (the node calls it for every one it gets): the evidence sent
+        before its obstacle messages. Messages that waited for it go out now (or wait on, if it is too old for them)."""
         with self._lock:
-            self._own_footprint = (dataclasses.replace(footprint, reach=self.config.sensor_reach, valid_for=0.0),
-                                   self._clock())
+            self._own_footprints.append(dataclasses.replace(footprint, reach=self.config.sensor_reach, valid_for=0.0))
+            waiting, self._awaiting_evidence = self._awaiting_evidence, []
+        self._publish_waited(waiting)
 
-    def _send_evidence(self):
-        """Before an obstacle message: an advert of this robot's pose under the plain footprint objectType,
-        which every bridge hears, unless one went out within EVIDENCE_INTERVAL from about here."""
+    def expect_footprints(self, expected=True):
+        """This robot advertises its footprint (the node's advertise_footprint): an obstacle message waits for one
+        near its stamp (EVIDENCE_WAIT s at most)."""
+        with self._lock:
+            self._expect_footprints = bool(expected)
+
+    def _evidence_for(self, update):
+        """This robot's footprint taken nearest ``update``'s stamp, when within evidence_window of it (both on this
+        robot's ROS clock: in simulation that is simulated time), else None. The recent ones are kept, so an update
+        that waited offline still finds the pose it was made at."""
+        best = min(self._own_footprints, key=lambda f: abs(update.stamp - f.stamp), default=None)
+        if best is not None and abs(update.stamp - best.stamp) <= self.config.evidence_window:
+            return best
+        return None
+
+    def _wait_for_evidence(self, update):
+        """True when ``update`` was kept back until a footprint near its stamp arrives (at start-up before navigation
+        publishes one, or when the footprint topic lags: at most EVIDENCE_WAIT s, see release_unevidenced). Sent
+        without, every peer that requires evidence would refuse it for good."""
+        with self._lock:
+            if self._evidence_for(update) is not None or not self._expect_footprints:
+                return False
+            self._awaiting_evidence.append((update, self._clock()))
+        self._count("awaiting_evidence")
+        LOG.info("%s: obstacle %s v%d (stamp %.3f) waits for a footprint of this robot within %g s of its stamp (at most "
+                 "%g s): sent without one, peers requiring evidence would refuse it", self.config.robot_name, update.uuid,
+                 update.version, update.stamp, self.config.evidence_window, EVIDENCE_WAIT)
+        return True
+
+    def release_unevidenced(self):
+        """Sends (without evidence, WARN) what waited EVIDENCE_WAIT s for a footprint that did not come; the broker
+        watch calls it every second."""
         now = self._clock()
         with self._lock:
-            own, last = self._own_footprint, self._last_evidence
-        if own is None or not 0.0 <= now - own[1] <= OWN_FOOTPRINT_MAX_AGE:
+            due = [(u, t) for u, t in self._awaiting_evidence if now - t >= EVIDENCE_WAIT]
+            self._awaiting_evidence = [(u, t) for u, t in self._awaiting_evidence if now - t < EVIDENCE_WAIT]
+        for update, since in due:
+            self._publish_now(update, since)
+
+    def _publish_waited(self, waited):
+        for update, since in waited:
+            with self._lock:
+                ready = self._evidence_for(update) is not None
+                if not ready:
+                    self._awaiting_evidence.append((update, since))
+            if ready:
+                self._publish_now(update, since)
+
+    def _publish_now(self, update, since):
+        """Publishes an update that waited, its deadline aged by the wait (a copy must not outlive the original)."""
+        fresh = lifetimes.aged(update, self._clock() - since)
+        if fresh is not None:
+            self.publish_obstacle(fresh, waited=True)
+
+    def _send_evidence(self, update):
+        """Before an obstacle message: an advert of this robot's footprint taken near the message's stamp, under the
+        plain footprint objectType, which every bridge hears (a bridge started again since the last one, too)."""
+        with self._lock:
+            own = self._evidence_for(update)
+        if own is None:
+            now = self._clock()
             self._count("published_without_evidence")
             if self._evidence_warned is None or now - self._evidence_warned >= 30.0:
                 self._evidence_warned = now
-                LOG.warning("%s: obstacle published without evidence: no footprint of this robot in the last %g s "
-                            "(footprint_topic); peers that require evidence refuse what it marks or clears. Check "
-                            "that move_base publishes global_costmap/footprint", self.config.robot_name,
-                            OWN_FOOTPRINT_MAX_AGE)
+                LOG.warning("%s: obstacle %s v%d published without evidence: no footprint of this robot within %g s of "
+                            "its stamp %.3f (footprint_topic); peers that require evidence refuse what it marks or "
+                            "clears. Check that move_base publishes global_costmap/footprint", self.config.robot_name,
+                            update.uuid, update.version, self.config.evidence_window, update.stamp)
             return False
-        footprint = own[0]
-        if last is not None and now - last[0] < EVIDENCE_INTERVAL and \
-                footprints.largest_move(last[1], footprint.points) < EVIDENCE_MOVE and last[2] == footprint.stamp:
-            return True
-        payload = footprints.footprint_payload(footprint, self.footprint_object_id, self.config.footprint_object_type)
         if not self._connected:
             return False
+        payload = footprints.footprint_payload(own, self.footprint_object_id, self.config.footprint_object_type)
         self._send(self._footprint_topic, payload, queue=False)
-        with self._lock:
-            self._last_evidence = (now, footprint.points, footprint.stamp)
         self._count("evidence_adverts_sent")
         self._count("footprint_bytes_published", len(payload))
         return True

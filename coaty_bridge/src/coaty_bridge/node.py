@@ -81,6 +81,17 @@ def update_to_msg(update):
     return msg
 
 
+class _OnNewSubscriber(rospy.SubscribeListener):
+    """Calls ``callback()`` whenever a subscriber connects to the publisher."""
+
+    def __init__(self, callback):
+        rospy.SubscribeListener.__init__(self)
+        self.callback = callback
+
+    def peer_subscribe(self, _topic, _publish_all, _publish_single):
+        self.callback()
+
+
 class RosoutHandler(logging.Handler):
     """Sends the pure modules' log records to rosout."""
 
@@ -241,11 +252,15 @@ class BridgeNode:
             topic="%s/from_fleet" % config.robot_name)
         # Resolves answering our Discover restore state: the handler never takes them as a renewal (issue 43)
         self.fleet_state = SafePublisher(
-            lambda: rospy.Publisher("fleet_state", SharedObstacle, queue_size=1000),
+            lambda: rospy.Publisher("fleet_state", SharedObstacle, queue_size=1000,
+                                    subscriber_listener=_OnNewSubscriber(self._on_restarted_handler)),
             topic="%s/fleet_state" % config.robot_name)
+        self._started = False
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint,
                                         on_footprint_withdrawn=self._on_fleet_footprint_withdrawn)
+        # a robot that advertises its footprint keeps its first obstacles back until its footprint is here
+        self.client.expect_footprints(self.footprint_config.advertise)
         self.fleet_robots = rospy.Publisher("fleet_robots", RobotFootprintArray, queue_size=2, latch=True)
         rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
         rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self._on_obstacle_list, queue_size=2)
@@ -276,6 +291,26 @@ class BridgeNode:
                           "obstacles under any robot's name are taken from anyone on the broker, and a broker "
                           "that is not on this machine may be reached without TLS")
         self.client.start()
+        self._started = True
+
+    def _on_restarted_handler(self):
+        """A new subscriber of fleet_state after start: the handler started again (issue 43, item 8) and holds
+        nothing. The fleet is asked again, and this robot's own updates go to it at once."""
+        if not self._started:
+            return   # the first connect asks the fleet anyway
+        def restore():
+            rospy.sleep(0.5)   # the subscriber's connection completes after this callback
+            own = self.client.restore()
+            for update in own:
+                try:
+                    self.fleet_state.publish(update_to_msg(update), "%s: own obstacle %s v%d back to the handler" % (
+                        self.config.robot_name, update.uuid, update.version))
+                except Exception as err:  # noqa: BLE001 - one bad value must not stop the rest
+                    self.fleet_state.drop("conversion", "own obstacle %s" % update.uuid, err)
+            if own:
+                rospy.loginfo("%s: %d of this robot's own updates handed back to the handler", self.config.robot_name,
+                              len(own))
+        threading.Thread(target=restore, name="coaty_bridge restore", daemon=True).start()
 
     def shutdown(self):
         self._timer.shutdown()

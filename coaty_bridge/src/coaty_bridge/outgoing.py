@@ -27,11 +27,13 @@ def _renewal_margin(deadline):
 class OutgoingMixin:
     """Publishing of CoatyBridgeClient."""
 
-    def publish_obstacle(self, update):
+    def publish_obstacle(self, update, waited=False):
         """Publishes one internal ObstacleUpdate to the fleet (Advertise), fleet-wide or to the area
         around the obstacle (``_area_for``). Returns False if it was dropped (too large); queues it
         while offline."""
-        self._send_evidence()   # every peer hears where this robot is before what it saw (evidence.py)
+        if not waited and self._wait_for_evidence(update):
+            return True               # sent as soon as a footprint near its stamp is here (evidence.py)
+        self._send_evidence(update)   # every peer hears where this robot is before what it saw (evidence.py)
         area = self._area_for(update)
         object_type = self.config.object_type if area is None else areas.area_object_type(self.config.object_type,
                                                                                             area)
@@ -268,6 +270,7 @@ class OutgoingMixin:
                 if fresh is not update:
                     # under the objectType it was queued with (an area's, or the plain one)
                     payload = self._obstacle_payload(fresh, parse_topic(topic).object_type)
+                self._send_evidence(fresh)   # its evidence did not go while offline (evidence.py)
                 # its deadline is now valid as of now (should the send fail and re-queue it)
                 self._send(topic, payload, update=fresh, queued_at=now)
             else:

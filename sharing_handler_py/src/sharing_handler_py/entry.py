@@ -58,13 +58,18 @@ def meta_key(obstacle):
             obstacle.deadline, obstacle.frame_id)
 
 
+#: The metadata key of an obstacle known only from copies restoring state: greater than any real one.
+UNKNOWN_KEY = (float("inf"), "", (), 0, "")
+
+
 class Entry:
     """Mutable state of one held obstacle."""
 
     __slots__ = ("uuid", "source", "owner", "rectangle", "deadline", "geometry", "frame_id", "arrival",
-                 "_expires", "_heap", "first_key", "max_version", "stamps", "present", "sorted_cells")
+                 "_expires", "_heap", "first_key", "max_version", "stamps", "present", "sorted_cells",
+                 "creator_known")
 
-    def __init__(self, obstacle, arrival, heap=None):
+    def __init__(self, obstacle, arrival, heap=None, live=True):
         self.uuid = obstacle.uuid
         self.source = obstacle.source
         self.owner = obstacle.source   # the source whose message made it here: its quota is charged
@@ -81,7 +86,12 @@ class Entry:
         self._heap = [] if heap is None else heap
         self._expires = None
         self.expires_at = arrival + obstacle.deadline
-        self.first_key = meta_key(obstacle)
+        # (a copy restoring state says nothing of the first share: any message that does takes over)
+        self.first_key = meta_key(obstacle) if live else UNKNOWN_KEY
+        # Who first shared it is known once its first share (version 1) arrived as it was made (live); a copy
+        # restoring state answers under the answering robot's name, so it never says who (issue 43: merges
+        # follow the creator, merging.py)
+        self.creator_known = live and obstacle.version == 1
         self.max_version = obstacle.version
         self.stamps = {}          # cell -> (version, source) of the update that last set it
         self.present = set()      # cells currently marked
@@ -97,8 +107,9 @@ class Entry:
             self._expires = value
             heapq.heappush(self._heap, (value, self.uuid))
 
-    def apply(self, obstacle):
-        """Applies one update by the stamp rule; returns True when anything visible changed."""
+    def apply(self, obstacle, live=True):
+        """Applies one update by the stamp rule; returns True when anything visible changed. The metadata comes only
+        from live messages (a copy restoring state answers under another robot's name)."""
         stamp = obstacle.stamp_key
         stamps, present = self.stamps, self.present
         get = stamps.get
@@ -120,8 +131,11 @@ class Entry:
             self.max_version = obstacle.version
             changed = True
         changed |= self._grow(obstacle.rectangle)
-        changed |= self._take_metadata(meta_key(obstacle), obstacle.source, obstacle.deadline,
-                                       obstacle.frame_id)
+        if live:
+            changed |= self._take_metadata(meta_key(obstacle), obstacle.source, obstacle.deadline,
+                                           obstacle.frame_id)
+            if obstacle.version == 1 and self.first_key[0] == 1:
+                self.creator_known = True
         if changed:
             self.sorted_cells = None
         return changed

@@ -418,21 +418,24 @@ class SharingHandler(MergingMixin, ManualMixin):
                       obstacle.deadline, self._policy.max_lifetime)
             obstacle = obstacle.replace(deadline=self._policy.cap_deadline(obstacle.deadline))
         shown = entry is not None and bool(entry.present)
+        # A copy under this robot's own name is its own update handed back by its bridge after a restart (only this
+        # robot publishes under its name): it says who first shared the obstacle, as a live message does.
+        metadata = live or obstacle.source == self.robot_name
         if entry is None:
-            entry = Entry(obstacle, self._clock(), self._deadlines)
+            entry = Entry(obstacle, self._clock(), self._deadlines, live=metadata)
             self._entries[obstacle.uuid] = entry
             self._quotas.added(entry.owner)
-            entry.apply(obstacle)
+            entry.apply(obstacle, metadata)
             changed = grown = True
             _log.info("%s: added obstacle %s from %s (v%d, %d cells, deadline %d s)", self.robot_name,
                       obstacle.uuid, obstacle.source, obstacle.version, len(entry.present),
                       obstacle.deadline)
         else:
-            rectangle, creator_known = entry.rectangle, entry.first_key[0] == 1
-            changed = entry.apply(obstacle)
+            rectangle, creator_known = entry.rectangle, entry.creator_known
+            changed = entry.apply(obstacle, metadata)
             # a grown rectangle can reach another obstacle; a first share that arrived late makes its
             # creator known, and only then can it merge (merging.py)
-            grown = entry.rectangle is not rectangle or (not creator_known and entry.first_key[0] == 1)
+            grown = entry.rectangle is not rectangle or (not creator_known and entry.creator_known)
             if live and obstacle.marked:
                 entry.note_deadline(self._clock(), obstacle.deadline)   # an observation renews
             elif not obstacle.marked:
@@ -574,7 +577,7 @@ class SharingHandler(MergingMixin, ManualMixin):
     def _check_external(self, obstacle, live=True):
         # The same rules the bridge applies to what arrives over MQTT (neither is looser).
         check_fleet_message(obstacle)
-        if obstacle.source == self.robot_name and obstacle.uuid in self._entries:
+        if live and obstacle.source == self.robot_name and obstacle.uuid in self._entries:
             # An echo, or someone else speaking for us about an obstacle we hold. An own obstacle
             # we do not hold is accepted: after a restart, peers give our obstacles back.
             raise InvalidMessageError("own_source", "message claims to come from this robot")

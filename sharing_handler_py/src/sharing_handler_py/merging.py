@@ -45,7 +45,7 @@ class MergingMixin:
     @staticmethod
     def _first_shared_by(entry, source):
         """True when the first share (version 1) of the obstacle has arrived here and came from ``source``."""
-        return entry.first_key[0] == 1 and entry.source == source
+        return entry.creator_known and entry.source == source
 
     def _mergeable(self, a, b):
         """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the

@@ -3,6 +3,7 @@
 Runs as robot_N/sharing_handler; every topic and service name is relative to the robot
 namespace except /diagnostics and the map topic. See the package README for the interface.
 """
+import collections
 import logging
 import sys
 import threading
@@ -25,6 +26,21 @@ from sharing_handler_py.markers import obstacle_markers
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError, InvalidRequestError
 from sharing_handler_py.logic import SharingHandler, remaining_deadline
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
+
+
+#: updates to the fleet kept while no bridge listens (the oldest go first beyond)
+UNSENT_KEPT = 1000
+
+
+class _OnNewSubscriber(rospy.SubscribeListener):
+    """Calls ``callback(publish_single)`` whenever a subscriber connects to the publisher."""
+
+    def __init__(self, callback):
+        rospy.SubscribeListener.__init__(self)
+        self.callback = callback
+
+    def peer_subscribe(self, _topic, _publish_all, publish_single):
+        self.callback(publish_single)
 
 
 class RosoutHandler(logging.Handler):
@@ -126,11 +142,16 @@ class HandlerNode:
         self._list_cache = {}       # uuid -> (cells, metadata, SharedObstacle) of the last list
         # One message that cannot be serialised is dropped there; the publisher stays usable.
         self._pub_layer = SafePublisher(
-            lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100),
+            lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100,
+                                    subscriber_listener=_OnNewSubscriber(self._on_new_layer)),
             topic="%s/shared_obstacles" % params.robot_name)
         self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
+        # What goes to the fleet while no bridge listens (it crashed and is starting again: issue 43, item 8) is kept,
+        # and handed to the bridge when it subscribes, deadlines aged: nothing this robot shares is lost that way.
+        self._unsent = collections.deque(maxlen=UNSENT_KEPT)   # (Obstacle, clock time)
         self._pub_fleet = SafePublisher(
-            lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000),
+            lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000,
+                                    subscriber_listener=_OnNewSubscriber(self._on_new_bridge)),
             topic="%s/to_fleet" % params.robot_name)
         self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
                                          latch=True)
@@ -145,7 +166,7 @@ class HandlerNode:
         self.handler = SharingHandler(
             params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
             on_to_layer=lambda o: self._deliver(self._pub_layer, o),
-            on_to_fleet=lambda o: self._deliver(self._pub_fleet, o),
+            on_to_fleet=self._to_fleet,
             on_expired=lambda u: self._pub_expired.publish(String(data=u)),
             on_change=self._list_changed,
             max_cells_per_message=params.max_cells_per_message,
@@ -176,6 +197,44 @@ class HandlerNode:
         if params.clock_skew is None:
             rospy.logwarn("%s: max_clock_skew = -1: stamps of fleet messages are not checked, so a replayed "
                           "message is refused only while its uuid is remembered as expired", params.robot_name)
+
+    def _to_fleet(self, obstacle):
+        if self._pub_fleet.get_num_connections() == 0:
+            self._unsent.append((obstacle, rospy.get_time()))
+            return
+        self._deliver(self._pub_fleet, obstacle)
+
+    def _on_new_bridge(self, publish_single):
+        """A bridge subscribed to to_fleet: what this robot shared while none listened goes to it now, oldest first."""
+        with self._lock:
+            unsent, now = list(self._unsent), rospy.get_time()
+            self._unsent.clear()
+        sent = 0
+        for obstacle, made in unsent:
+            left = obstacle.deadline - max(0.0, now - made)
+            if left < 1.0:
+                continue   # it ended meanwhile on this robot: sending it would revive it elsewhere
+            try:
+                publish_single(msg_from_obstacle(obstacle.replace(deadline=int(left))))
+                sent += 1
+            except Exception as err:  # noqa: BLE001 - one bad value must not stop the rest
+                rospy.logwarn("%s: obstacle %s not handed to the bridge: %s", self.params.robot_name, obstacle.uuid, err)
+        if sent:
+            rospy.loginfo("%s: a bridge subscribed: handed it the %d updates made while none listened",
+                          self.params.robot_name, sent)
+
+    def _on_new_layer(self, publish_single):
+        """A layer subscribed (move_base started, or started again after a crash: issue 43, item 8): it gets every
+        obstacle held here, full state, on its own connection."""
+        with self._lock:
+            held = self.handler.obstacles()
+        for h in held:
+            try:
+                publish_single(msg_from_obstacle(h.to_obstacle()))
+            except Exception as err:  # noqa: BLE001 - one bad value must not stop the rest
+                rospy.logwarn("%s: obstacle %s not handed to a new layer: %s", self.params.robot_name, h.uuid, err)
+        if held:
+            rospy.loginfo("%s: a layer subscribed: handed it the %d obstacles held", self.params.robot_name, len(held))
 
     def _deliver(self, publisher, obstacle):
         try:
