@@ -4,7 +4,7 @@ server and watches every robot's handler.
 
 Usage: fleet_probe.py robot_0 robot_1 ...
 Publishes a latched /map (0.05 m, origin (-5, -2.5), 200 x 100 cells). Prints JSON lines:
-  {"event": "list", "robot": r, "uuids": [...], "cells": {uuid: n}, "deadlines", "rects", "sources"}
+  {"event": "list", "robot": r, "stamp": s, "uuids": [...], "cells": {uuid: n}, "deadlines", "rects", "sources"}
                                                                    on every shared_obstacle_list
   {"event": "fleet_robots", "robot": r, "robots": [names]}          on every fleet_robots
   {"event": "diagnostics", "status": [{"name", "level", "message", "values"}]}
@@ -62,7 +62,8 @@ def main():
     publishers = {}
     for robot in robots:
         rospy.Subscriber("/%s/shared_obstacle_list" % robot, SharedObstacleArray, lambda msg, r=robot: emit(
-            {"event": "list", "robot": r, "uuids": sorted(o.uuid for o in msg.obstacles),
+            {"event": "list", "robot": r, "stamp": msg.header.stamp.to_sec(),
+             "uuids": sorted(o.uuid for o in msg.obstacles),
              "cells": {o.uuid: len(o.marked_indexes) for o in msg.obstacles},
              "deadlines": {o.uuid: o.deadline for o in msg.obstacles},
              "rects": {o.uuid: [round(v, 4) for v in o.rectangle_shape] for o in msg.obstacles},

@@ -27,6 +27,7 @@ obstacles lie within their robot's reach.
 """
 import functools
 import json
+import math
 import os
 import signal
 import subprocess
@@ -147,6 +148,12 @@ class NodeFleet:
     def deadlines(self, robot):
         return dict(self.list_of(robot)["deadlines"])
 
+    def expiries(self, robot):
+        """uuid -> when (s, wall clock) its lease runs out on ``robot``: the list's stamp + its deadline (whole
+        seconds: within 1 s). Unlike the deadline, comparable between lists of different times."""
+        last = self.list_of(robot)
+        return {u: last["stamp"] + d for u, d in last["deadlines"].items()}
+
     def status(self, name, after=0):
         """The newest diagnostics status called ``name`` among the probe's events from index ``after``."""
         with self.probe._cond:
@@ -229,18 +236,25 @@ class NodeFleet:
         return latency
 
     def publish(self, topic, payload):
+        """The attacker publishes raw; an obstacle's rectangle is remembered (the next sentinel keeps clear of it)."""
+        try:
+            rect = json.loads(payload)["object"]["rectangle"]
+            self.its_rectangles = getattr(self, "its_rectangles", []) + [tuple(float(v) for v in rect)]
+        except Exception:
+            pass            # not an obstacle advert, or not one the codec writes
         self.attacker.publish(topic, payload)
 
     def attacker_at(self, x, y):
         """The attacker's advertised pose from now on (it advertises it before each message)."""
         self.attacker_pose = (x, y)
 
-    def advertise_pose(self, pose=None, points=None, robot=ATTACKER):
-        """The attacker advertises robot_3's footprint (a 0.6 m square at its pose, or ``points``), stamped now,
-        with a 4 m reach, under the plain objectType every bridge hears: its evidence (issue 43)."""
+    def advertise_pose(self, pose=None, points=None, robot=ATTACKER, stamp=None):
+        """The attacker advertises robot_3's footprint (a 0.6 m square at its pose, or ``points``), stamped now (or
+        ``stamp``), with a 4 m reach, under the plain objectType every bridge hears: its evidence (issue 43)."""
         x, y = pose or self.attacker_pose
         points = points or ((x - 0.3, y - 0.3), (x + 0.3, y - 0.3), (x + 0.3, y + 0.3), (x - 0.3, y + 0.3))
-        footprint = fp.RobotFootprint(robot=robot, stamp=time.time(), frame_id="map", points=points, reach=REACH)
+        footprint = fp.RobotFootprint(robot=robot, stamp=time.time() if stamp is None else stamp, frame_id="map",
+                                      points=points, reach=REACH)
         self.publish(str(Topic(NS, "ADV", self.login, object_type=fp.DEFAULT_FOOTPRINT_OBJECT_TYPE)),
                      fp.footprint_payload(footprint, self.advert_id))
 
@@ -248,21 +262,50 @@ class NodeFleet:
         """A valid obstacle of the attacker's own, sent after an attack and waited for on every robot:
         a sender's messages are delivered in order (its own queue in each bridge, one from_fleet topic),
         so once every robot lists it the attack before it has been handled or dropped everywhere, and
-        the outcome can be judged (rather than only the counter that names it). In a band y 1.0-1.05,
-        0.8 m apart, away from the good and the fresh obstacles."""
+        the outcome can be judged (rather than only the counter that names it). Placed where it merges with
+        nothing (_sentinel_spot)."""
         self.sentinels = getattr(self, "sentinels", 0) + 1
-        ax, ay = self.attacker_pose
-        x, y = ax - 1.6 + 0.8 * ((self.sentinels - 1) % 5), ay - 0.5     # within the attacker's reach
-        update = evil(rectangle=(x, y, x + 0.05, y + 0.05), marked=(cell(x + 0.01, y + 0.01),))
+        x, y = self._sentinel_spot()
+        # a short lease: the spots free up again
+        update = evil(rectangle=(x, y, x + 0.05, y + 0.05), marked=(cell(x + 0.01, y + 0.01),), deadline=20)
+        # an obstacle that covered the cell already (an earlier sentinel at this spot) says nothing about this one
+        # until it changes: the sentinel's own uuid listed, or merged into one that its new cell made grow
+        covering_before = {r: self._absorbers(r, x, y) for r in ROBOTS}
         self.advertise(update)
         wait_until(lambda: all(update.uuid in self.list_of(r)["uuids"] or
-                               any(u in self.list_of(r)["uuids"] for u in self._absorbers(r, x, y)) for r in ROBOTS),
+                               any(covering_before[r].get(u) != now for u, now in self._absorbers(r, x, y).items())
+                               for r in ROBOTS),
                    "the attacker's sentinel obstacle on every robot")
 
+    def _sentinel_spot(self):
+        """A cell within the attacker's reach, on the map, more than merge_distance (0.5 m) + 0.1 from every
+        obstacle of robot_3's any robot lists, from what the attacker sent since (its_rectangles) and from the good
+        and fresh obstacles: robot_3's own obstacles merge (one creator), and the sentinel must not merge into one
+        that an attack just changed."""
+        ax, ay = self.attacker_pose
+        near = [tuple(rect) for r in ROBOTS for u, rect in self.list_of(r)["rects"].items()
+                if self.list_of(r)["sources"][u] == ATTACKER]
+        # (a rectangle wider than one robot sees across, 2 * (4 m + 0.5 m), is refused by every receiver)
+        near += [r for r in getattr(self, "its_rectangles", []) if max(r[2] - r[0], r[3] - r[1]) <= 9.0]
+        self.its_rectangles = []
+        # not on the good obstacles nor in the fresh obstacles' band (other creators: no merge, but no overlap)
+        apart = [tuple(r) for _, r in GOOD] + [(-5.0, -0.05, 5.0, 0.35)]
+        spots = sorted(((0.35 * i, 0.4 * j + (0.1 if j > 0 else -0.1)) for i in range(-9, 10) for j in range(-7, 7)
+                        if math.hypot(0.35 * i, 0.4 * j) <= 3.0), key=lambda d: (abs(d[1]), abs(d[0])))
+        for dx, dy in spots:
+            x, y = ax + dx, ay + dy
+            if not (OX + 0.2 <= x <= OX + SX * RES - 0.3 and OY + 0.2 <= y <= OY + SY * RES - 0.3):
+                continue
+            spot = (x, y, x + 0.05, y + 0.05)
+            if all(_gap(spot, r) > 0.6 for r in near) and all(_gap(spot, r) > 0.1 for r in apart):
+                return x, y
+        raise AssertionError("no spot for a sentinel near %s: robot_3's obstacles all around" % (self.attacker_pose,))
+
     def _absorbers(self, robot, x, y):
-        """uuids of listed obstacles covering the sentinel's cell (it may have merged into one)."""
-        return [u for u, rect in self.list_of(robot)["rects"].items()
-                if rect[0] <= x + 0.01 <= rect[2] and rect[1] <= y + 0.01 <= rect[3] and u not in self.good]
+        """uuid -> (rectangle, cells) of listed obstacles covering the sentinel's cell (it may have merged into one)."""
+        last = self.list_of(robot)
+        return {u: (tuple(rect), last["cells"][u]) for u, rect in last["rects"].items()
+                if rect[0] <= x + 0.01 <= rect[2] and rect[1] <= y + 0.01 <= rect[3] and u not in self.good}
 
     def advertise(self, update, source_id=None, **raw):
         self.advertise_pose()
@@ -278,6 +321,11 @@ class NodeFleet:
             except Exception:
                 pass
         print("fresh-obstacle latencies (s): " + ", ".join("%s %.3f" % (w, l) for w, l in LATENCIES))
+
+
+def _gap(a, b):
+    """Distance between rectangles (x0, y0, x1, y1); 0 when they overlap or touch."""
+    return math.hypot(max(0.0, a[0] - b[2], b[0] - a[2]), max(0.0, a[1] - b[3], b[1] - a[3]))
 
 
 def evil(**fields):

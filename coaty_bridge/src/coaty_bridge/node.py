@@ -479,39 +479,38 @@ class BridgeNode:
         counters["publishers_recreated"] = self.from_fleet.recreated
         flood = self._new_source_drops(counters)
         login_level, login_problem = self.client.login_alerts.status()
+        # Every current problem is reported, the worst sets the level: a login alert must not hide
+        # the sender flooding right now, nor the other way round (issue 43).
+        problems = []
         if level == safe_publisher.ERROR:
-            status.level = DiagnosticStatus.ERROR
-            status.message = problem
+            problems.append((DiagnosticStatus.ERROR, problem))
         elif level == safe_publisher.WARN:
-            status.level = DiagnosticStatus.WARN
-            status.message = problem
-        elif self.client.tls_problem and not self.client.connected:
+            problems.append((DiagnosticStatus.WARN, problem))
+        if self.client.tls_problem and not self.client.connected:
             # an absent, unreadable or expired certificate or key (issue 43, item 9): which file, what, what to do
-            status.level = DiagnosticStatus.ERROR
-            status.message = "not connected to %s: %s" % (self.config.broker_url, self.client.tls_problem)
-        elif login_level:
+            problems.append((DiagnosticStatus.ERROR, "not connected to %s: %s"
+                             % (self.config.broker_url, self.client.tls_problem)))
+        if login_level:
             # another connection under this robot's login (issue 43, item 6): WARN once, ERROR when repeated
-            status.level = DiagnosticStatus.ERROR if login_level >= 2 else DiagnosticStatus.WARN
-            status.message = login_problem
-        elif flood:
+            problems.append((DiagnosticStatus.ERROR if login_level >= 2 else DiagnosticStatus.WARN, login_problem))
+        if flood:
             # a flooding sender (issue 27, item 3) or one claiming what it could not see (issue 43): name it
-            status.level = DiagnosticStatus.WARN
-            status.message = "dropping a sender's excess or implausible cells: " + flood
-        elif self.client.connected:
+            problems.append((DiagnosticStatus.WARN, "dropping a sender's excess or implausible cells: " + flood))
+        if self.client.connected:
             # connected is not enough (issue 27, attack 6): do heartbeats cross the bus?
             live, reason = self.client.liveness.status()
             if live == liveness.ERROR:
-                status.level = DiagnosticStatus.ERROR
-                status.message = "connected to %s but %s" % (self.config.broker_url, reason)
+                problems.append((DiagnosticStatus.ERROR, "connected to %s but %s" % (self.config.broker_url, reason)))
             elif live == liveness.WARN:
-                status.level = DiagnosticStatus.WARN
-                status.message = "connected to %s but %s" % (self.config.broker_url, reason)
-            else:
-                status.level = DiagnosticStatus.OK
-                status.message = "connected to %s" % self.config.broker_url
+                problems.append((DiagnosticStatus.WARN, "connected to %s but %s" % (self.config.broker_url, reason)))
+        elif not (self.client.tls_problem and not self.client.connected):
+            problems.append((DiagnosticStatus.WARN, "not connected to %s" % self.config.broker_url))
+        if problems:
+            status.level = max(level_ for level_, _ in problems)
+            status.message = "; ".join(message for _, message in problems)
         else:
-            status.level = DiagnosticStatus.WARN
-            status.message = "not connected to %s" % self.config.broker_url
+            status.level = DiagnosticStatus.OK
+            status.message = "connected to %s" % self.config.broker_url
         status.values = [KeyValue(key, str(value)) for key, value in sorted(counters.items())]
         array = DiagnosticArray()
         array.header.stamp = rospy.Time.now()
