@@ -27,7 +27,7 @@ from coaty_bridge import codec
 from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic
 
-from test_attacks_nodes import (ATTACKER, ATTACKER_POSE, DURATION, NS, OT, OX, OY, RES, ROBOTS, SX, GOOD, cell, evil,
+from test_attacks_nodes import (ATTACKER, ATTACKER_POSE, DURATION, NS, OT, OX, OY, RES, ROBOTS, SX, SY, GOOD, cell, evil,
                                 fleet, wait_until)  # noqa: F401 (fleet: the module's running fleet, a fixture)
 from test_secure_default import Peer
 
@@ -279,6 +279,42 @@ def test_item_3_a_plausible_clear_of_one_cell_never_shortens_the_lease_of_the_re
     # the good obstacle lost the one cell it was seen free: the rest unchanged (not lost, not shortened)
     fleet.good_cells_cleared = getattr(fleet, "good_cells_cleared", 0) + 1
     fleet.fresh_obstacle_reaches_everyone("item 3 plausible clear")
+
+
+def test_item_3_an_obstacle_cleared_fleet_wide_is_shown_again_when_its_robot_sees_it_again(fleet):
+    """A plausible clear of every cell ends robot_0's obstacle on every robot's list; robot_0's layer still sees
+    the block and marks it again (an update of the uuid it knows): every robot shows it again, all its cells,
+    robot_0's. Before, a clear with deadline 1 ended its lease and tombstoned the uuid, and nothing came back in
+    the 90 s watched. (The lease is kept, so the uuid is held, hidden, and shown again; were it tombstoned, the
+    update would go out as a new obstacle of robot_0's: either passes.)"""
+    before = fleet.snapshot()
+    rect = [0.8, -1.6, 1.0, -1.4]                          # near robot_0 at (0, -1), apart from its other obstacles
+    block = fleet.add("robot_0", rect)
+    wait_until(lambda: listed_everywhere(fleet, block), "robot_0's block on every robot")
+    cells = tuple(cell(rect[0] + 0.025 + 0.05 * i, rect[1] + 0.025 + 0.05 * j) for i in range(4) for j in range(4))
+    assert all(fleet.held(r)[block][2] == len(cells) for r in ROBOTS)
+    fleet.attacker_at(1.5, -0.5)                           # 1.2 m from it: it may see it free
+    claim(fleet, evil(uuid=block, version=50, rectangle=tuple(rect), marked=(), cleared=cells, deadline=1))
+    fleet.sentinel()
+    for robot in ROBOTS:
+        wait_until(lambda r=robot: block not in fleet.list_of(r)["uuids"], "the block cleared on " + robot)
+    time.sleep(1.5)                # past the clear's deadline 1 s: a lease it had shortened would have ended
+    # robot_0's layer marks the block's cells again
+    fleet.command({"cmd": "publish", "robot": "robot_0", "topic": "obstacle_updates", "msg": dict(
+        uuid=block, marked_indexes=list(cells), version=51, source="robot_0", deadline=DURATION,
+        rectangle_shape=rect, resolution=RES, origin_x=OX, origin_y=OY, size_x=SX, size_y=SY, stamp=time.time(),
+        frame_id="map")})
+    cx, cy = (rect[0] + rect[2]) / 2, (rect[1] + rect[3]) / 2
+
+    def shown_again(robot):
+        return [u for u, (source, r, n) in fleet.held(robot).items()
+                if source == "robot_0" and r[0] <= cx <= r[2] and r[1] <= cy <= r[3] and n == len(cells)]
+    for robot in ROBOTS:
+        wait_until(lambda r=robot: shown_again(r), "robot_0's block shown again on " + robot)
+    print("item 3: the block is shown again as %s" % ("the same uuid" if shown_again("robot_1") == [block] else
+                                                       "a new obstacle of robot_0's"))
+    fleet.attacker_at(*ATTACKER_POSE)
+    after_each(fleet, before, "item 3 shown again")
 
 
 # -------------------------------------------------------------------------------------------------- item 4

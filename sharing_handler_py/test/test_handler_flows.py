@@ -309,6 +309,25 @@ def test_a_robot_that_sees_an_expired_obstacle_again_shares_it_again_under_a_new
     assert r.handler.counters["reshared"] == 1 and r.handler.counters["dropped_expired"] == 0
 
 
+
+@pytest.mark.parametrize("left,reshared", [(0.9, True), (1.0, False)])
+def test_a_robot_that_sees_an_obstacle_in_its_last_second_shares_it_again_before_the_tick(left, reshared):
+    """The same when the layer's mark comes while the lease has less than 1 s left and the expiry tick has not
+    run yet (the node test of issue 43, item 3 met this race: the mark was dropped as expired, for good)."""
+    r = Recorder(duration=10)
+    shared = r.handler.on_proposal(proposal())
+    r.clock.now += 10 - left
+    again = r.handler.on_internal_update(update(shared.uuid, marked=(11, 12), source="robot_0"))
+    if reshared:
+        assert again is not None and again.uuid != shared.uuid and again.version == 1
+        assert not r.handler.get(shared.uuid) and r.handler.is_tombstoned(shared.uuid)
+        assert r.expired[-1] == shared.uuid and r.handler.counters["expired"] == 1
+        assert r.handler.counters["reshared"] == 1 and r.handler.counters["dropped_expired"] == 0
+    else:                           # a whole second left: an update of the obstacle as it is
+        assert again is not None and again.uuid == shared.uuid
+        assert r.handler.counters["reshared"] == 0 and r.handler.counters["expired"] == 0
+
+
 # ---------------------------------------------------------------- manual add and list
 
 def test_manual_add_fills_the_rectangle_and_is_shared_like_a_detection():

@@ -217,3 +217,24 @@ def test_after_a_restart_the_robots_own_updates_handed_back_say_it_first_shared_
     beside = r.handler.on_proposal(proposal(cells=cells_in(rect(0.5, 0, 0.8, 0.1), 2), rectangle=rect(0.5, 0, 0.8, 0.1),
                                             source="robot_2"))
     assert beside.uuid == U("mine")
+
+
+def test_a_new_share_never_merges_into_an_obstacle_whose_lease_ran_out_before_the_tick():
+    """A robot whose obstacle expired shares what it sees again as a new obstacle; on a peer the old one may not
+    have been swept yet (the expiry tick comes later). Merged into it, the new marks (version 1 of the new uuid)
+    lost to the old clears (version 50 of the old one) per cell: the block showed on the sharing robot, hidden on
+    this one until the lease ran out (found by the node test of item 3)."""
+    r = robot()
+    area = rect(0, 0, 0.2, 0.2)
+    cells = cells_in(area)
+    old, new = U("a-old"), U("b-new")
+    assert old < new                                 # the old one would survive the merge
+    r.handler.on_external(update(old, marked=cells, version=1, rectangle=area, deadline=10, stamp=100.0))
+    r.handler.on_external(update(old, cleared=cells, version=50, source="robot_3", rectangle=area, deadline=10,
+                                 stamp=100.0))
+    assert r.handler.get(old).cells == ()            # every cell seen free: hidden, held until its lease ends
+    r.clock.now += 10.2                              # its lease ran out; the tick has not run
+    assert r.handler.on_external(update(new, marked=cells, version=1, rectangle=area, deadline=60, stamp=110.0))
+    assert r.handler.get(old) is None and r.handler.is_tombstoned(old)
+    assert r.handler.get(new).cells == cells and r.handler.get(new).source == "robot_1"
+    assert r.handler.counters["merged_obstacles"] == 0

@@ -47,10 +47,7 @@ depend on the order: a later mark (a newer stamp: the block is back) shows it ag
 and an older one stays cleared. The lease (obstacle_duration after the last observation) only
 bounds what nobody checks.
 
-Tombstones (issue 27, issue 43): an expired uuid is remembered, so that a late or replayed message
-cannot bring it back on this robot only. A tombstone never stops a robot that sees the obstacle again:
-a live message stamped after the tombstone that marks cells shows it again (``revived``), and this
-robot's own layer marking cells of an expired obstacle shares them as a new obstacle (``reshared``).
+Tombstones (issue 27, issue 43): leases.py.
 
 Bounded authority (issue 27, sharing_msgs.authority): no peer can make an obstacle larger, longer-lived
 or newer than this handler's own caps. A deadline is cut to obstacle_duration on arrival (so a
@@ -58,13 +55,13 @@ renewal reaches at most arrival + obstacle_duration), a message beyond the exten
 caps, or with a cell outside its rectangle, is dropped, and two obstacles whose union would exceed
 the caps are not merged.
 """
-import heapq
 import logging
 import math
 import uuid as uuidlib
 
 from sharing_handler_py.entry import Entry, HeldObstacle, remaining_deadline  # noqa: F401 (re-exported)
 from sharing_handler_py.errors import REFUSED, InvalidMessageError
+from sharing_handler_py.leases import LeasesMixin
 from sharing_handler_py.manual import ManualMixin
 from sharing_handler_py.merging import MergingMixin
 from sharing_handler_py.nearby import RectangleIndex
@@ -125,7 +122,7 @@ def _noop(*_args):
     pass
 
 
-class SharingHandler(MergingMixin, ManualMixin):
+class SharingHandler(LeasesMixin, MergingMixin, ManualMixin):
     """Decides which proposals become fleet obstacles, which updates go out, what expires.
 
     Not thread-safe: call it from one thread (the node holds a lock around every call).
@@ -233,9 +230,6 @@ class SharingHandler(MergingMixin, ManualMixin):
         entry = self._entries.get(uuid)
         return None if entry is None else self._held(entry, self._clock())
 
-    def is_tombstoned(self, uuid):
-        return uuid in self._tombstones
-
     def source_counters(self):
         """Quota drops per source, {"dropped_source_quota.robot_9": n, ...}, for /diagnostics."""
         return self._quota_log.counters()
@@ -262,6 +256,7 @@ class SharingHandler(MergingMixin, ManualMixin):
         """A new obstacle proposed by the layer. Returns the authorised Obstacle (version 1), the
         update it became when it lies within merge_distance of a live obstacle, or None when it
         was invalid."""
+        self.expire()                   # as on_external: an ended obstacle is not merged into
         self._counters["proposals"] += 1
         try:
             if obstacle.uuid:
@@ -313,6 +308,12 @@ class SharingHandler(MergingMixin, ManualMixin):
             check_message_values(obstacle)
             self._check_grid(obstacle)
             if entry.expires_at - self._clock() < 1.0:
+                if obstacle.marked:
+                    # its lease ends now, but the layer sees it occupied: it ends here as the expiry tick would
+                    # end it, and what is seen goes out as a new obstacle (issue 43, item 3: the robot that sees
+                    # it again shares it again, whether or not the tick came first)
+                    self._expire_entry(obstacle.uuid)
+                    return self._reshare(obstacle)
                 # deadlines travel in whole seconds: sent now it would outlive the obstacle here
                 raise InvalidMessageError("expired", "obstacle %s has less than 1 s left" % obstacle.uuid)
             if obstacle.version <= entry.max_version and entry.max_version >= obstacle_rules.MAX_VERSION:
@@ -385,6 +386,10 @@ class SharingHandler(MergingMixin, ManualMixin):
         never sent back out. ``live``: an observation as it was made (an Advertise, a renewal); a
         state copy is not (on_state). Returns True when applied now; False when dropped or deferred
         (waiting for a grid)."""
+        # an obstacle whose lease ran out is gone before anything is applied or merged, not at the next tick: a
+        # peer's new share must not merge into it (its clears, stamped in its own versions, would hide the new
+        # marks, on this robot only)
+        self.expire()
         try:
             revive = self._check_external(obstacle, live)
             if self._geometry is None:
@@ -453,42 +458,6 @@ class SharingHandler(MergingMixin, ManualMixin):
             self._compact_deadlines()   # renewals leave stale items; amortised O(1) per update
         return True
 
-    def expire(self):
-        """Removes every obstacle whose deadline has passed since its local arrival (no message
-        goes to the fleet; the layer is told). Returns the expired uuids, sorted."""
-        now = self._clock()
-        heap, entries, due = self._deadlines, self._entries, set()
-        while heap and heap[0][0] <= now:
-            _t, uuid = heapq.heappop(heap)
-            entry = entries.get(uuid)
-            if entry is not None and now >= entry.expires_at:   # else: gone, or its expiry moved since
-                due.add(uuid)
-        gone = sorted(due)
-        for uuid in gone:
-            entry = self._forget(uuid)
-            self._counters["expired"] += 1
-            _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
-                      entry.expires_at - entry.arrival, entry.arrival)
-            self._expired_out(uuid)
-        tombs = self._tomb_heap
-        while tombs and tombs[0][0] <= now:
-            until, uuid = heapq.heappop(tombs)
-            if self._tombstones.get(uuid) == until:
-                del self._tombstones[uuid]
-                self._tombstoned_at.pop(uuid, None)
-        if len(heap) > 4 * len(entries) + 64:
-            self._compact_deadlines()
-        self._quota_log.flush(now)
-        if gone:
-            self._on_change()
-        return gone
-
-    def _compact_deadlines(self):
-        """Renewals leave items of replaced expiries in the heap: rebuilt from the entries, so it stays
-        O(obstacles)."""
-        self._deadlines[:] = [(e.expires_at, u) for u, e in self._entries.items()]
-        heapq.heapify(self._deadlines)
-
     def _quota_drop(self, obstacle, reason, now):
         """A message beyond its source's quota: counted (in all and per source), logged at most once
         per 10 s per source and reason, state untouched. Returns False (not applied)."""
@@ -522,26 +491,6 @@ class SharingHandler(MergingMixin, ManualMixin):
                      source, (uuid or "")[:80], error)
 
     # ----------------------------------------------------------------- internals
-
-    def _forget(self, uuid):
-        """Drops a held obstacle and returns its entry. The uuid (and those it absorbed) is remembered
-        at least obstacle_duration more, so that a late message cannot resurrect the obstacle on this
-        robot only; with stamps checked, until no message for it can pass the stamp check (a replay,
-        issue 27)."""
-        now = self._clock()
-        entry = self._entries.pop(uuid)
-        self._nearby.remove(uuid)
-        self._quotas.removed(entry.owner)
-        until = now + max(self._policy.tombstone_time, entry.deadline)
-        self._tombstones[uuid] = until
-        self._tombstoned_at[uuid] = now
-        heapq.heappush(self._tomb_heap, (until, uuid))
-        for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
-            del self._aliases[alias]
-            self._tombstones[alias] = until
-            self._tombstoned_at[alias] = now
-            heapq.heappush(self._tomb_heap, (until, alias))
-        return entry
 
     def _note_shown(self, entry, shown, obstacle):
         """After `obstacle` was applied to `entry`, which had present cells when `shown`: an obstacle left
@@ -590,16 +539,6 @@ class SharingHandler(MergingMixin, ManualMixin):
         self._policy.check_stamp(obstacle.stamp, self._clock())
         return revive
 
-    def _revive(self, obstacle):
-        """Lifts the tombstone of an obstacle seen occupied after it expired here (a live mark stamped
-        later): the robot that sees it again shares it again."""
-        since = self._tombstoned_at.pop(obstacle.uuid)
-        del self._tombstones[obstacle.uuid]
-        self._counters["revived"] += 1
-        _log.info("%s: obstacle %s, expired here at %.3f, seen occupied again by %s (v%d stamped %.3f): "
-                  "held again", self.robot_name, obstacle.uuid, since, obstacle.source, obstacle.version,
-                  obstacle.stamp)
-
     def _check_authority(self, obstacle, entry):
         """The receiver's caps (issue 27) on one message: its rectangle, its cells, its version.
         Each message is judged on its own (not on what it would grow the obstacle to), so the
@@ -617,25 +556,6 @@ class SharingHandler(MergingMixin, ManualMixin):
         g = self._geometry
         check_cells_inside(obstacle.rectangle, obstacle.marked, obstacle.cleared, g.resolution, g.origin_x,
                            g.origin_y, g.size_x, "%s %s v%d" % (what, obstacle.uuid or "(new)", obstacle.version))
-
-    def _reshare(self, update):
-        """This robot's layer marked cells of an obstacle that expired here (its tombstone stops peers'
-        late copies, not the robot that sees it): its marked cells become a new obstacle, shared like a
-        proposal, and the layer drops the expired uuid."""
-        proposal = update.replace(uuid="", version=0, cleared=(), source=self.robot_name, deadline=0)
-        try:
-            check_message_values(proposal)
-            self._check_grid(proposal)
-            self._policy.check_extent(proposal.rectangle, "rectangle", self.robot_name)
-            self._check_inside(proposal, "update")
-        except REFUSED as err:
-            self.reject(self.robot_name, update.uuid, err)
-            return None
-        self._counters["reshared"] += 1
-        _log.info("%s: obstacle %s expired here, but this robot sees %d of its cells occupied again: shared "
-                  "again as a new obstacle", self.robot_name, update.uuid, len(update.marked))
-        self._expired_out(update.uuid)
-        return self.on_proposal(proposal)
 
     def _check_grid(self, obstacle):
         if not self._geometry.matches(obstacle.geometry):
