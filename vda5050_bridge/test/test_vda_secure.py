@@ -150,7 +150,13 @@ def secure_vda(tmp_path):
                    "the rosmaster")
         probe = Probe(env)
         procs.append(probe.proc)
-        wait_until(lambda: os.path.exists(os.path.join(folder, "robots", "robot_1.password")), "run_broker's secrets")
+        try:
+            wait_until(lambda: os.path.exists(os.path.join(folder, "robots", "robot_1.password")),
+                       "run_broker's secrets", 60.0)
+        except AssertionError as err:   # what the nodes said, to tell a slow start from a failed one
+            log.flush()
+            with open(str(tmp_path / "nodes.log")) as said:
+                raise AssertionError("%s; the nodes' log ends: %s" % (err, said.read()[-2000:])) from None
         url = wait_until(lambda: probe.param("/fleet/broker_url"), "/fleet/broker_url")
         creds = FleetCredentials(folder, [], "fleet")
         master = (MASTER_CONTROL_LOGIN, read_password_file(creds.master_control_password_file))
