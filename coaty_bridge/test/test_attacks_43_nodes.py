@@ -288,7 +288,7 @@ def test_item_3_an_obstacle_cleared_fleet_wide_is_shown_again_when_its_robot_see
     the 90 s watched. (The lease is kept, so the uuid is held, hidden, and shown again; were it tombstoned, the
     update would go out as a new obstacle of robot_0's: either passes.)"""
     before = fleet.snapshot()
-    rect = [0.8, -1.6, 1.0, -1.4]                          # near robot_0 at (0, -1), apart from its other obstacles
+    rect = [1.0, -1.7, 1.2, -1.5]      # near robot_0 at (0, -1), beyond merge_distance of its other obstacles
     block = fleet.add("robot_0", rect)
     wait_until(lambda: listed_everywhere(fleet, block), "robot_0's block on every robot")
     cells = tuple(cell(rect[0] + 0.025 + 0.05 * i, rect[1] + 0.025 + 0.05 * j) for i in range(4) for j in range(4))
