@@ -72,8 +72,8 @@ def js_obstacle():
     # Written as a JS program would: 1 rather than 1.0, plain index arrays.
     return {"objectType": OT, "coreType": "CoatyObject", "objectId": oid, "name": "js obstacle",
             "uuid": oid, "source": "js_peer", "version": 2, "stamp": 1700000200, "frameId": "map",
-            "deadline": 30, "rectangle": [0, 0, 1, 1], "resolution": 1, "origin": [0, -5], "size": [20, 10],
-            "markedIndexes": [3, 4, 199], "clearedIndexes": []}
+            "deadline": 30, "rectangle": [3, -5, 5, -3], "resolution": 1, "origin": [0, -5], "size": [20, 10],
+            "markedIndexes": [3, 4, 23], "clearedIndexes": []}          # each cell inside the rectangle
 
 
 def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_process):
@@ -102,6 +102,15 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
 
             # (a) an obstacle our bridge publishes reaches the peer with every field intact
             mine = ros_obstacle("robot_0")
+            # robot_0's footprint taken at the obstacle's stamp: the evidence it goes out with (else it would wait up
+            # to 5 s for one and go out with its deadline aged)
+            square = [[1.0, 2.0], [1.5, 2.0], [1.5, 2.5], [1.0, 2.5]]
+            for _ in range(30):        # the bridge has it once it advertised it: the peer sees that
+                probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square,
+                            "stamp": mine["stamp"]})
+                if [e for e in peer.events if e.get("event") == "footprint"]:
+                    break
+                time.sleep(0.1)
             probe.send({"cmd": "to_fleet", "robot": "robot_0", "msg": mine})
             seen = peer.expect(lambda e: e.get("event") == "advertise" and e["object"]["uuid"] == mine["uuid"],
                                what="(a) robot_0's obstacle at the Coaty JS peer")
@@ -120,7 +129,7 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
             got = probe.expect(lambda e: e.get("event") == "from_fleet" and e["robot"] == "robot_0" and
                                e["msg"]["uuid"] == theirs["uuid"], what="(b) the JS obstacle on robot_0/from_fleet")
             msg = got["msg"]
-            assert msg["marked_indexes"] == [3, 4, 199] and msg["cleared_indexes"] == []
+            assert msg["marked_indexes"] == [3, 4, 23] and msg["cleared_indexes"] == []
             assert msg["resolution"] == 1.0 and msg["types"]["resolution"] == "float"
             assert (msg["origin_x"], msg["origin_y"]) == (0.0, -5.0) and msg["types"]["origin_x"] == "float"
             assert (msg["size_x"], msg["size_y"], msg["version"], msg["deadline"]) == (20, 10, 2, 30)
@@ -130,7 +139,6 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
 
             # (e) robot footprints: robot_0's advert reaches the Coaty JS peer as a valid CoatyObject, and
             # a footprint the peer advertises (integers as JS writes them) is listed on robot_0/fleet_robots
-            square = [[1.0, 2.0], [1.5, 2.0], [1.5, 2.5], [1.0, 2.5]]
             for _ in range(30):
                 probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square})
                 if [e for e in peer.events if e.get("event") == "footprint"]:
@@ -221,7 +229,7 @@ def test_renewals_events_pass_between_a_bridge_and_coaty_js(coaty_js, json_lines
                 "objectType": "org.fleetsharing.ObstacleRenewals", "coreType": "CoatyObject",
                 "objectId": str(uuidlib.uuid4()), "name": "js_peer", "source": "js_peer", "frameId": "map",
                 "resolution": 1, "origin": [0, -5], "size": [20, 10],
-                "obstacles": [[theirs, 3, 1700000200, 30, [0, 0, 1, 1], [3, 4], []]]}})
+                "obstacles": [[theirs, 3, 1700000200, 30, [3, -5, 5, -4], [3, 4], []]]}})   # cells in the rectangle
             deadline = time.monotonic() + 10
             while not [u for u in got if u.uuid == theirs] and time.monotonic() < deadline:
                 time.sleep(0.05)

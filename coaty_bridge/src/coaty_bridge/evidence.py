@@ -96,6 +96,8 @@ class EvidenceMixin:
         if own is None:
             now = self._clock()
             self._count("published_without_evidence")
+            if not self._expect_footprints:
+                return False            # a robot that advertises no footprint has none to send (advertise_footprint)
             if self._evidence_warned is None or now - self._evidence_warned >= 30.0:
                 self._evidence_warned = now
                 LOG.warning("%s: obstacle %s v%d published without evidence: no footprint of this robot within %g s of "
