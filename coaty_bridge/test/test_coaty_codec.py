@@ -182,3 +182,22 @@ def test_resolve_keeps_good_obstacles_next_to_bad_ones(make_update):
 def test_identity_object_is_a_coaty_identity():
     assert codec.identity_object(IDENT.upper(), "robot_3") == {
         "objectType": "coaty.Identity", "coreType": "Identity", "objectId": IDENT, "name": "robot_3"}
+
+
+def test_a_one_cell_rectangle_carrying_a_region_is_refused_before_its_cells_are_decoded(make_update):
+    """The count of cells against the rectangle (issue 43, item 1) is what refuses the bomb *before expansion*:
+    its compact string is longer than one cell can take, so it is not even base64-decoded. Every other check
+    (cells outside the rectangle, and the count again after decoding) would refuse it only once all its cells are
+    built. Its tail is made invalid base64 here: refused on the count, the reason says so; decoded first, the
+    tail would be the reason (red with the codec's count check removed)."""
+    from coaty_bridge.errors import RectangleCellsError
+    region = tuple(880221 + dx + 2000 * dy for dx in range(40) for dy in range(40))
+    bomb = make_update(rectangle=(1.05, 2.0, 1.1, 2.05), marked=region, cleared=())   # cell 880221's square
+    obj = wire(bomb)
+    assert isinstance(obj["markedIndexes"], str) and len(obj["markedIndexes"]) > 12   # one 5-byte varint's worth
+    obj["markedIndexes"] = obj["markedIndexes"][:-4] + "!!!!"
+    with pytest.raises(RectangleCellsError, match="more cells than its rectangle holds"):
+        obstacle_from_object(obj, OT)
+    obj["rectangle"] = [1.05, 2.0, 3.05, 4.0]          # the region's rectangle: now the tail is what is wrong
+    with pytest.raises(WrongTypeError, match="not base64"):
+        obstacle_from_object(obj, OT)
