@@ -163,3 +163,34 @@ def test_a_certificate_that_expires_while_connected_is_named_on_the_next_connect
         assert client.counters().get("connect_failures", 0) >= 1
     finally:
         client.stop(timeout=0.5)
+
+
+@pytest.mark.broker
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")   # the error raised on purpose
+def test_paho_network_thread_ended_by_an_unexpected_error_is_started_again(pki, tls_broker, tmp_path, caplog):
+    """What an expired certificate did (the issue): an error paho does not expect ends its network thread, and the
+    bridge then only said "unreachable". The bridge starts the thread again and says so (ERROR). Here the error is
+    raised once inside paho's read (the other tests never end the thread: red only with the restart removed)."""
+    _folder, ca, _server, good, _expired, _future = pki
+    client = bridge(tls_broker, good.cert, good.key, ca.cert)
+    try:
+        client.start()
+        polling.wait_until(lambda: client.subscribed, "connected with a good certificate", timeout=20)
+        paho = client._mqtt
+        read = paho._packet_read
+        raised = []
+
+        def fail_once():
+            if not raised:
+                raised.append(True)
+                raise ValueError("an error paho does not expect")
+            return read()
+        paho._packet_read = fail_once
+        with caplog.at_level(logging.ERROR, logger="coaty_bridge"):
+            polling.wait_until(lambda: raised, "paho reading", timeout=70)   # within one keepalive (60 s)
+            polling.wait_until(lambda: client.counters().get("network_thread_restarts", 0) >= 1
+                               and paho._thread is not None and paho._thread.is_alive(),
+                               "paho's network thread started again", timeout=20)
+        assert any("network thread ended" in r.getMessage() for r in caplog.records)
+    finally:
+        client.stop(timeout=0.5)
