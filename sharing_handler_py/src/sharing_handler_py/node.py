@@ -157,8 +157,12 @@ class HandlerNode:
                                          latch=True)
         self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         # RViz: the fleet's obstacles with source, age, time left and cells (markers.py), on every change and
-        # at each tick (the ages move)
-        self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1, latch=True)
+        # at each tick (the ages move), only while someone looks. Not latched: a subscriber gets the markers of the
+        # obstacles held when it connects, built then; a latched array would have to be built and serialised on every
+        # change of the list whether or not anyone looks, under the lock (1,200 obstacles held: ~40 ms of CPU each
+        # time, which a flooding login's obstacles made other robots' messages wait for).
+        self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1,
+                                            subscriber_listener=_OnNewSubscriber(self._on_new_markers_subscriber))
         # Fleet messages wait in a queue per source, served round-robin by one worker (issue 43, item 5): a
         # login flooding valid obstacles fills only its own queue, and another robot's message waits for at
         # most one of its messages, not for the flood (rospy's own queue drops the oldest, whoever sent it).
@@ -395,18 +399,28 @@ class HandlerNode:
         array.obstacles = [self._list_entry(h, now, fresh) for h in self.handler.obstacles()]
         self._list_cache = fresh
         self._pub_list.publish(array)
-        self._publish_markers(changed=True)
+        self._publish_markers()
         finished = time.monotonic()
         self._list_due = finished + (finished - started) / self.params.list_cost_share
 
-    def _publish_markers(self, changed=False):
-        """On every change of the list, so that the latched array a late subscriber (RViz started later,
-        rostopic echo) gets first is the list as it is; at each tick only while someone looks (the
-        labels' ages move)."""
-        if not changed and self._pub_markers.get_num_connections() == 0:
+    def _publish_markers(self):
+        """On every change of the list and at each tick (the labels' ages move), only while someone looks; a
+        subscriber that connects gets the current markers first (_on_new_markers_subscriber)."""
+        if self._pub_markers.get_num_connections() == 0:
             return
-        self._pub_markers.publish(obstacle_markers(self.handler.obstacles(), rospy.get_time(),
-                                                   self._map_frame or "map", rospy.Time.now()))
+        self._pub_markers.publish(self._markers())
+
+    def _markers(self):
+        return obstacle_markers(self.handler.obstacles(), rospy.get_time(), self._map_frame or "map", rospy.Time.now())
+
+    def _on_new_markers_subscriber(self, publish_single):
+        """RViz (or rostopic echo) connected: the obstacles held now, on its own connection."""
+        with self._lock:
+            markers = self._markers()
+        try:
+            publish_single(markers)
+        except Exception as err:  # noqa: BLE001 - a closed connection must not disturb the rest
+            rospy.logwarn("%s: markers not sent to a new subscriber: %s", self.params.robot_name, err)
 
     def _list_entry(self, held, now, fresh):
         """Full-state message of one held obstacle. The message built for the last list is
