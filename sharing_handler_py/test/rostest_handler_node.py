@@ -83,7 +83,7 @@ class Bus:
         sub(NS + "to_fleet", SharedObstacle, self._rec(self.fleet), queue_size=1000)
         sub(NS + "expired_obstacles", String, lambda m: self._rec(self.expired)(m.data), queue_size=100)
         sub(NS + "shared_obstacle_list", SharedObstacleArray, self._on_list, queue_size=10)
-        # fleet_obstacle_markers is subscribed late, in test_06b (a late subscriber's first, latched array)
+        # fleet_obstacle_markers is subscribed late, in test_06b (the first array a late subscriber gets)
         self.first_markers = None
         self.markers = None
         sub("/diagnostics", DiagnosticArray, self._on_diag, queue_size=100)
@@ -277,11 +277,11 @@ class TestHandlerNode(unittest.TestCase):
     def test_06b_the_fleets_obstacles_are_drawn_for_rviz_with_source_age_time_left_and_cells(self):
         bus = self.bus
         # Nobody has looked at the markers so far: a late subscriber (RViz started now) gets the obstacles
-        # held now as its first, latched array, not the empty one from before the first share.
+        # held now as its first array, not an empty one from before the first share.
         held = len(self.list_srv().obstacles)
         self.assertGreater(held, 0)
         bus.subscribe_markers()
-        wait_for(lambda: bus.first_markers is not None, what="the latched fleet_obstacle_markers")
+        wait_for(lambda: bus.first_markers is not None, what="the first fleet_obstacle_markers a late subscriber gets")
         self.assertEqual(len(bus.labels(bus.first_markers)), held, bus.labels(bus.first_markers))
         wait_for(lambda: bus.list and bus.list.obstacles and len(bus.labels()) == len(bus.list.obstacles),
                  what="one label per listed obstacle on fleet_obstacle_markers")
