@@ -34,7 +34,7 @@ def make_update():
         values = dict(uuid=str(uuidlib.uuid4()), source="robot_0", version=1, stamp=1700000000.5,
                       frame_id="map", deadline=60, rectangle=(1.0, 2.0, 3.5, 4.0), resolution=0.05,
                       origin_x=-10.0, origin_y=-20.0, size_x=2000, size_y=2000,
-                      marked=(2001000, 2001001, 2003002), cleared=(2000999,))
+                      marked=(880221, 880222, 882223), cleared=(880220,))
         values.update(fields)
         return ObstacleUpdate(**values)
     return make

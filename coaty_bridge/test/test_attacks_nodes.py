@@ -1,7 +1,7 @@
 """Issue 27's attacks 1-10 against real nodes, in the secure default (issue 27, first "Done when").
 
 One private rosmaster, `run_broker` as the fleet launch starts it (per-robot logins, ACL on sourceId,
-client id = login, no anonymous logins), and three robots, each a real `sharing_handler` node and a
+no anonymous logins), and three robots, each a real `sharing_handler` node and a
 real `coaty_bridge` node with the parameters robot.launch gives them (`obstacle_duration` 1200;
 `authenticate_sources`, `password_file`, ... as in test_secure_default.launch_bridge_params).
 `fleet_probe.py` plays the map server, calls `add_obstacle` and watches every handler's
@@ -19,9 +19,15 @@ the probe's own scheduling make that flaky), (3) /diagnostics of the node that s
 the attack (its counter goes up on every robot), or, where the broker itself now stops it
 (client-id takeover, an event under another robot's sourceId, anonymous logins), the broker is
 shown to have stopped it.
+
+Plausible evidence (issue 43) is on, as in the launch: fleet_probe publishes each robot's footprint at a
+pose (ROBOT_POSES) that its bridge advertises with its 4 m reach, and the attacker advertises its own
+(robot_3's) pose before each message it sends, near what it claims; the good, fresh and sentinel
+obstacles lie within their robot's reach.
 """
 import functools
 import json
+import math
 import os
 import signal
 import subprocess
@@ -50,9 +56,13 @@ RES, OX, OY, SX, SY = 0.05, -5.0, -2.5, 200, 100   # fleet_probe's map (10 m x 5
 HANDLER = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                        "sharing_handler_py", "scripts", "sharing_handler")
 WAIT = 30.0                             # generous bound on a condition: the test waits for it
+# where each robot stands (fleet_probe publishes its footprint there; its bridge advertises it with a 4 m reach)
+ROBOT_POSES = {"robot_0": (0.0, -1.0), "robot_1": (2.5, -1.0), "robot_2": (-2.5, -1.0)}
+ATTACKER_POSE = (0.0, 1.5)              # robot_3's, as the attacker advertises it (it may move: attacker_at)
+REACH = 4.0
 # good obstacles: more than merge_distance (0.5 m) from each other, from the fresh ones (y 0..0.3)
-# and from the attacks (y >= 1.0)
-GOOD = [("robot_0", [-4.5, -2.0, -4.2, -1.7]), ("robot_0", [-1.0, -2.0, -0.7, -1.7]),
+# and from the attacks (y >= 1.0), within their robot's reach
+GOOD = [("robot_0", [-3.5, -2.0, -3.2, -1.7]), ("robot_0", [-1.0, -2.0, -0.7, -1.7]),
         ("robot_1", [3.0, -2.0, 3.3, -1.7])]
 LATENCIES = []
 
@@ -72,6 +82,7 @@ class NodeFleet:
         wait_until(self.watcher.settled, "the watcher")
         assert self.watcher.accepted
         self.login = identity_for(NS, ATTACKER)
+        self.advert_id = str(uuidlib.uuid4())
         self.connect_attacker()
         self.bridges, self.logs, self.handlers = {}, {}, {}
         for robot in ROBOTS:
@@ -89,6 +100,9 @@ class NodeFleet:
         self.probe.expect(lambda e: e.get("event") == "ready", timeout=60, what="probe ready")
         self.next_id = 0
         self.fresh_count = 0
+        self.attacker_pose = ATTACKER_POSE
+        for robot in ROBOTS:
+            self.command({"cmd": "pose", "robot": robot, "x": ROBOT_POSES[robot][0], "y": ROBOT_POSES[robot][1]})
         for robot in ROBOTS:
             wait_until(lambda r=robot: self.identity_adverts(r), robot + "'s bridge logged in", timeout=60)
             wait_until(lambda r=robot: self.list_of(r) is not None, robot + "'s first list", timeout=60)
@@ -96,11 +110,13 @@ class NodeFleet:
         wait_until(lambda: all(self.status("coaty_bridge: " + r, after=0) and
                                self.status("coaty_bridge: " + r)["values"].get("peers_heard") == "2"
                                for r in ROBOTS), "every bridge hearing both peers", timeout=60)
+        # every bridge has heard the others' footprints (the evidence their obstacles are judged by)
+        wait_until(lambda: all(set(ROBOTS) - {r} <= set(self.fleet_robots_of(r)) for r in ROBOTS),
+                   "every bridge hearing the others' footprints", timeout=60)
         self.good = self._share_good()
 
     def connect_attacker(self):
-        """(Re)connects the attacker under robot_3's login. The broker makes the login its client id, so
-        another connection under the same login (attack 5) takes this one's place."""
+        """(Re)connects the attacker under robot_3's login."""
         self.attacker = Peer(self.port, *self.creds.login(ATTACKER))
         self.peers.append(self.attacker)
         wait_until(self.attacker.settled, "the attacker's login")
@@ -116,6 +132,10 @@ class NodeFleet:
         with self.probe._cond:
             return [e for e in self.probe.events if e.get("event") == kind]
 
+    def fleet_robots_of(self, robot):
+        lists = [e["robots"] for e in self.events("fleet_robots") if e["robot"] == robot]
+        return lists[-1] if lists else []
+
     def list_of(self, robot):
         lists = [e for e in self.events("list") if e["robot"] == robot]
         return lists[-1] if lists else None
@@ -127,6 +147,12 @@ class NodeFleet:
 
     def deadlines(self, robot):
         return dict(self.list_of(robot)["deadlines"])
+
+    def expiries(self, robot):
+        """uuid -> when (s, wall clock) its lease runs out on ``robot``: the list's stamp + its deadline (whole
+        seconds: within 1 s). Unlike the deadline, comparable between lists of different times."""
+        last = self.list_of(robot)
+        return {u: last["stamp"] + d for u, d in last["deadlines"].items()}
 
     def status(self, name, after=0):
         """The newest diagnostics status called ``name`` among the probe's events from index ``after``."""
@@ -196,7 +222,7 @@ class NodeFleet:
     def fresh_obstacle_reaches_everyone(self, what):
         """robot_0 adds an obstacle; every robot must list it. Returns the latency (s) from the
         add_obstacle command to the last robot's list holding it (receipt in this process)."""
-        x = -4.5 + 0.8 * (self.fresh_count % 12)
+        x = -3.2 + 0.8 * (self.fresh_count % 9)   # within robot_0's reach
         self.fresh_count += 1
         start = time.monotonic()
         uuid = self.add("robot_0", [x, 0.0, x + 0.2, 0.2])
@@ -210,28 +236,79 @@ class NodeFleet:
         return latency
 
     def publish(self, topic, payload):
+        """The attacker publishes raw; an obstacle's rectangle is remembered (the next sentinel keeps clear of it)."""
+        try:
+            rect = json.loads(payload)["object"]["rectangle"]
+            self.its_rectangles = getattr(self, "its_rectangles", []) + [tuple(float(v) for v in rect)]
+        except Exception:
+            pass            # not an obstacle advert, or not one the codec writes
         self.attacker.publish(topic, payload)
+
+    def attacker_at(self, x, y):
+        """The attacker's advertised pose from now on (it advertises it before each message)."""
+        self.attacker_pose = (x, y)
+
+    def advertise_pose(self, pose=None, points=None, robot=ATTACKER, stamp=None):
+        """The attacker advertises robot_3's footprint (a 0.6 m square at its pose, or ``points``), stamped now (or
+        ``stamp``), with a 4 m reach, under the plain objectType every bridge hears: its evidence (issue 43)."""
+        x, y = pose or self.attacker_pose
+        points = points or ((x - 0.3, y - 0.3), (x + 0.3, y - 0.3), (x + 0.3, y + 0.3), (x - 0.3, y + 0.3))
+        footprint = fp.RobotFootprint(robot=robot, stamp=time.time() if stamp is None else stamp, frame_id="map",
+                                      points=points, reach=REACH)
+        self.publish(str(Topic(NS, "ADV", self.login, object_type=fp.DEFAULT_FOOTPRINT_OBJECT_TYPE)),
+                     fp.footprint_payload(footprint, self.advert_id))
 
     def sentinel(self):
         """A valid obstacle of the attacker's own, sent after an attack and waited for on every robot:
         a sender's messages are delivered in order (its own queue in each bridge, one from_fleet topic),
         so once every robot lists it the attack before it has been handled or dropped everywhere, and
-        the outcome can be judged (rather than only the counter that names it). In a band y 1.0-1.05,
-        0.8 m apart, away from the good and the fresh obstacles."""
+        the outcome can be judged (rather than only the counter that names it). Placed where it merges with
+        nothing (_sentinel_spot)."""
         self.sentinels = getattr(self, "sentinels", 0) + 1
-        x = -4.5 + 0.8 * ((self.sentinels - 1) % 12)
-        update = evil(rectangle=(x, 1.0, x + 0.05, 1.05), marked=(cell(x + 0.01, 1.01),))
+        x, y = self._sentinel_spot()
+        # a short lease: the spots free up again
+        update = evil(rectangle=(x, y, x + 0.05, y + 0.05), marked=(cell(x + 0.01, y + 0.01),), deadline=20)
+        # an obstacle that covered the cell already (an earlier sentinel at this spot) says nothing about this one
+        # until it changes: the sentinel's own uuid listed, or merged into one that its new cell made grow
+        covering_before = {r: self._absorbers(r, x, y) for r in ROBOTS}
         self.advertise(update)
         wait_until(lambda: all(update.uuid in self.list_of(r)["uuids"] or
-                               any(u in self.list_of(r)["uuids"] for u in self._absorbers(r, x)) for r in ROBOTS),
+                               any(covering_before[r].get(u) != now for u, now in self._absorbers(r, x, y).items())
+                               for r in ROBOTS),
                    "the attacker's sentinel obstacle on every robot")
 
-    def _absorbers(self, robot, x):
-        """uuids of listed obstacles covering the sentinel's cell (it may have merged into one)."""
-        return [u for u, rect in self.list_of(robot)["rects"].items()
-                if rect[0] <= x + 0.01 <= rect[2] and rect[1] <= 1.01 <= rect[3] and u not in self.good]
+    def _sentinel_spot(self):
+        """A cell within the attacker's reach, on the map, more than merge_distance (0.5 m) + 0.1 from every
+        obstacle of robot_3's any robot lists, from what the attacker sent since (its_rectangles) and from the good
+        and fresh obstacles: robot_3's own obstacles merge (one creator), and the sentinel must not merge into one
+        that an attack just changed."""
+        ax, ay = self.attacker_pose
+        near = [tuple(rect) for r in ROBOTS for u, rect in self.list_of(r)["rects"].items()
+                if self.list_of(r)["sources"][u] == ATTACKER]
+        # (a rectangle wider than one robot sees across, 2 * (4 m + 0.5 m), is refused by every receiver)
+        near += [r for r in getattr(self, "its_rectangles", []) if max(r[2] - r[0], r[3] - r[1]) <= 9.0]
+        self.its_rectangles = []
+        # not on the good obstacles nor in the fresh obstacles' band (other creators: no merge, but no overlap)
+        apart = [tuple(r) for _, r in GOOD] + [(-5.0, -0.05, 5.0, 0.35)]
+        spots = sorted(((0.35 * i, 0.4 * j + (0.1 if j > 0 else -0.1)) for i in range(-9, 10) for j in range(-7, 7)
+                        if math.hypot(0.35 * i, 0.4 * j) <= 3.0), key=lambda d: (abs(d[1]), abs(d[0])))
+        for dx, dy in spots:
+            x, y = ax + dx, ay + dy
+            if not (OX + 0.2 <= x <= OX + SX * RES - 0.3 and OY + 0.2 <= y <= OY + SY * RES - 0.3):
+                continue
+            spot = (x, y, x + 0.05, y + 0.05)
+            if all(_gap(spot, r) > 0.6 for r in near) and all(_gap(spot, r) > 0.1 for r in apart):
+                return x, y
+        raise AssertionError("no spot for a sentinel near %s: robot_3's obstacles all around" % (self.attacker_pose,))
+
+    def _absorbers(self, robot, x, y):
+        """uuid -> (rectangle, cells) of listed obstacles covering the sentinel's cell (it may have merged into one)."""
+        last = self.list_of(robot)
+        return {u: (tuple(rect), last["cells"][u]) for u, rect in last["rects"].items()
+                if rect[0] <= x + 0.01 <= rect[2] and rect[1] <= y + 0.01 <= rect[3] and u not in self.good}
 
     def advertise(self, update, source_id=None, **raw):
+        self.advertise_pose()
         obj = codec.obstacle_to_object(update, OT)
         obj.update(raw)
         self.publish(str(Topic(NS, "ADV", source_id or self.login, object_type=OT)),
@@ -244,6 +321,11 @@ class NodeFleet:
             except Exception:
                 pass
         print("fresh-obstacle latencies (s): " + ", ".join("%s %.3f" % (w, l) for w, l in LATENCIES))
+
+
+def _gap(a, b):
+    """Distance between rectangles (x0, y0, x1, y1); 0 when they overlap or touch."""
+    return math.hypot(max(0.0, a[0] - b[2], b[0] - a[2]), max(0.0, a[1] - b[3], b[1] - a[3]))
 
 
 def evil(**fields):
@@ -305,13 +387,15 @@ def test_attack_2_a_peer_cannot_make_a_lease_longer(fleet):
     rect = GOOD[2][1]
     inside = cell((rect[0] + rect[2]) / 2, (rect[1] + rect[3]) / 2)
     before, counted = fleet.snapshot(), fleet.counters("handler", "capped_deadlines")
+    fleet.attacker_at(3.0, -0.5)            # beside it (issue 43: from afar its messages would not count at all)
     # an observation of a cell it has, claiming 2^32-1 s (cut to obstacle_duration), then a clear of
-    # a cell it does not have claiming the same (keeps the earlier expiry)
+    # it with an older stamp (no cell changes) claiming the same (a clear never changes the lease)
     fleet.advertise(evil(uuid=target, version=2, rectangle=tuple(rect), marked=(inside,),
                          deadline=obstacle_rules.MAX_UINT32))
-    fleet.advertise(evil(uuid=target, version=3, rectangle=tuple(rect), marked=(),
-                         cleared=(cell(rect[0] + 0.01, rect[1] + 0.01) - SX,), deadline=obstacle_rules.MAX_UINT32))
+    fleet.advertise(evil(uuid=target, version=1, rectangle=tuple(rect), marked=(),
+                         cleared=(inside,), deadline=obstacle_rules.MAX_UINT32))
     fleet.sentinel()                        # the lists after it carry the leases
+    fleet.attacker_at(*ATTACKER_POSE)
     fleet.assert_good_unchanged(before)
     for robot in ROBOTS:
         assert fleet.deadlines(robot)[target] <= DURATION
@@ -322,7 +406,7 @@ def test_attack_2_a_peer_cannot_make_a_lease_longer(fleet):
 # ------------------------------------------------------------------------------ attack 4
 
 def test_attack_4_a_few_bytes_declaring_a_million_cells_are_not_expanded(fleet):
-    before, counted = fleet.snapshot(), fleet.counters("bridge", "dropped.too_many_obstacle_cells")
+    before, counted = fleet.snapshot(), fleet.counters("bridge", "dropped.more_cells_than_rectangle")
     bomb = evil(size_x=1000, size_y=1000, origin_x=OX, origin_y=OY, rectangle=(0.0, 1.2, 0.05, 1.25),
                 marked=tuple(range(10 ** 6)))
     payload = json.dumps({"object": codec.obstacle_to_object(bomb, OT)}).encode()
@@ -332,7 +416,7 @@ def test_attack_4_a_few_bytes_declaring_a_million_cells_are_not_expanded(fleet):
     fleet.assert_good_unchanged(before)
     for robot in ROBOTS:
         assert bomb.uuid not in fleet.held(robot)
-    fleet.wait_counted("bridge", "dropped.too_many_obstacle_cells", counted)
+    fleet.wait_counted("bridge", "dropped.more_cells_than_rectangle", counted)
     fleet.fresh_obstacle_reaches_everyone("attack 4 cells")
 
 
@@ -352,8 +436,9 @@ def test_attack_4_a_discover_flood_is_rate_limited(fleet):
 # ------------------------------------------------------------------------------ attack 5
 
 def test_attack_5_a_robots_client_id_cannot_be_taken_over(fleet):
-    """Stopped at the broker: the client id is the login, so robot_3's login connecting under robot_0's
-    client id gets its own login as id, and without robot_0's password nobody logs in as robot_0."""
+    """Stopped at the broker and by what the logs do not show: robot_0's log shows its client id without the
+    nonce (a different id), its identity is another id than the one it uses, and without robot_0's password
+    nobody logs in as robot_0. (A second connection under a robot's own login: test_attacks_43_nodes.py.)"""
     victim = identity_for(NS, "robot_0")
     client_id = fleet.logs["robot_0"].find("MQTT client id")[0].split("MQTT client id ", 1)[1].split(",", 1)[0]
     before = fleet.snapshot()
@@ -429,8 +514,9 @@ def test_attack_7_replays_are_refused(fleet):
     topic, payload = captured[0]
     seen = len([1 for t, p in list(fleet.watcher.received) if t == topic and p == payload])
     fleet.publish(topic, payload)
-    stale_counted = fleet.counters("handler", "dropped_stale_stamp")
-    future_counted = fleet.counters("handler", "dropped_future_stamp")
+    # no pose was advertised near such a stamp: the bridges refuse both for lack of evidence (issue 43), before a
+    # handler would refuse them for their stamps (test_peer_authority.py shows that without evidence)
+    refused = fleet.counters("bridge", "dropped.implausible_evidence")
     stale = evil(stamp=time.time() - DURATION - 60)
     future = evil(stamp=time.time() + 3600)
     fleet.advertise(stale)
@@ -441,8 +527,7 @@ def test_attack_7_replays_are_refused(fleet):
     for robot in ROBOTS:
         assert stale.uuid not in fleet.held(robot) and future.uuid not in fleet.held(robot), \
             "%s holds a replayed or far-future obstacle" % robot
-    fleet.wait_counted("handler", "dropped_stale_stamp", stale_counted)
-    fleet.wait_counted("handler", "dropped_future_stamp", future_counted)
+    fleet.wait_counted("bridge", "dropped.implausible_evidence", refused, at_least=2)
     fleet.assert_good_unchanged(before)
     fleet.fresh_obstacle_reaches_everyone("attack 7")
 

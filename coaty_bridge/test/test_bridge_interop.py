@@ -57,8 +57,10 @@ def coaty_js():
 
 def ros_obstacle(source, **fields):
     # 64 cells in a row, so the compact form is the deflated one; 3 scattered cleared cells.
-    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=list(range(2001000, 2001064)) + [2003005, 3999999],
-               cleared_indexes=[5, 2000999, 2002999], deadline=90, rectangle_shape=[0.25, 7.5, 1.75, 9.0], source=source,
+    # (all inside the rectangle: x 255..284, y 5..34 on this grid)
+    msg = dict(uuid=str(uuidlib.uuid4()), marked_indexes=[y * 2000 + x for y in (5, 6, 7) for x in range(255, 277)][:64]
+               + [30 * 2000 + 260, 34 * 2000 + 284], cleared_indexes=[8 * 2000 + 255, 20 * 2000 + 270, 34 * 2000 + 255],
+               deadline=90, rectangle_shape=[0.25, 7.5, 1.75, 9.0], source=source,
                resolution=0.05000000074505806, origin_x=-12.5, origin_y=7.25, size_x=2000, size_y=2000,
                version=1, stamp=1700000123.5, frame_id="map")
     msg.update(fields)
@@ -70,8 +72,8 @@ def js_obstacle():
     # Written as a JS program would: 1 rather than 1.0, plain index arrays.
     return {"objectType": OT, "coreType": "CoatyObject", "objectId": oid, "name": "js obstacle",
             "uuid": oid, "source": "js_peer", "version": 2, "stamp": 1700000200, "frameId": "map",
-            "deadline": 30, "rectangle": [0, 0, 1, 1], "resolution": 1, "origin": [0, -5], "size": [20, 10],
-            "markedIndexes": [3, 4, 199], "clearedIndexes": []}
+            "deadline": 30, "rectangle": [3, -5, 5, -3], "resolution": 1, "origin": [0, -5], "size": [20, 10],
+            "markedIndexes": [3, 4, 23], "clearedIndexes": []}          # each cell inside the rectangle
 
 
 def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_process):
@@ -100,6 +102,15 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
 
             # (a) an obstacle our bridge publishes reaches the peer with every field intact
             mine = ros_obstacle("robot_0")
+            # robot_0's footprint taken at the obstacle's stamp: the evidence it goes out with (else it would wait up
+            # to 5 s for one and go out with its deadline aged)
+            square = [[1.0, 2.0], [1.5, 2.0], [1.5, 2.5], [1.0, 2.5]]
+            for _ in range(30):        # the bridge has it once it advertised it: the peer sees that
+                probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square,
+                            "stamp": mine["stamp"]})
+                if [e for e in peer.events if e.get("event") == "footprint"]:
+                    break
+                time.sleep(0.1)
             probe.send({"cmd": "to_fleet", "robot": "robot_0", "msg": mine})
             seen = peer.expect(lambda e: e.get("event") == "advertise" and e["object"]["uuid"] == mine["uuid"],
                                what="(a) robot_0's obstacle at the Coaty JS peer")
@@ -118,7 +129,7 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
             got = probe.expect(lambda e: e.get("event") == "from_fleet" and e["robot"] == "robot_0" and
                                e["msg"]["uuid"] == theirs["uuid"], what="(b) the JS obstacle on robot_0/from_fleet")
             msg = got["msg"]
-            assert msg["marked_indexes"] == [3, 4, 199] and msg["cleared_indexes"] == []
+            assert msg["marked_indexes"] == [3, 4, 23] and msg["cleared_indexes"] == []
             assert msg["resolution"] == 1.0 and msg["types"]["resolution"] == "float"
             assert (msg["origin_x"], msg["origin_y"]) == (0.0, -5.0) and msg["types"]["origin_x"] == "float"
             assert (msg["size_x"], msg["size_y"], msg["version"], msg["deadline"]) == (20, 10, 2, 30)
@@ -128,7 +139,6 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
 
             # (e) robot footprints: robot_0's advert reaches the Coaty JS peer as a valid CoatyObject, and
             # a footprint the peer advertises (integers as JS writes them) is listed on robot_0/fleet_robots
-            square = [[1.0, 2.0], [1.5, 2.0], [1.5, 2.5], [1.0, 2.5]]
             for _ in range(30):
                 probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square})
                 if [e for e in peer.events if e.get("event") == "footprint"]:
@@ -203,7 +213,7 @@ def test_renewals_events_pass_between_a_bridge_and_coaty_js(coaty_js, json_lines
                 except AssertionError:
                     continue
             now[0] = 1010.0
-            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(2001500,), cleared=(),
+            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(880250,), cleared=(),
                                                        deadline=100))
             now[0] = 1090.0
             assert source.renew_due() == 1
@@ -219,7 +229,7 @@ def test_renewals_events_pass_between_a_bridge_and_coaty_js(coaty_js, json_lines
                 "objectType": "org.fleetsharing.ObstacleRenewals", "coreType": "CoatyObject",
                 "objectId": str(uuidlib.uuid4()), "name": "js_peer", "source": "js_peer", "frameId": "map",
                 "resolution": 1, "origin": [0, -5], "size": [20, 10],
-                "obstacles": [[theirs, 3, 1700000200, 30, [0, 0, 1, 1], [3, 4], []]]}})
+                "obstacles": [[theirs, 3, 1700000200, 30, [3, -5, 5, -4], [3, 4], []]]}})   # cells in the rectangle
             deadline = time.monotonic() + 10
             while not [u for u in got if u.uuid == theirs] and time.monotonic() < deadline:
                 time.sleep(0.05)

@@ -38,7 +38,10 @@ def diagnostics(probe, robot, key, value):
 
 
 def test_node_bridges_ros_and_mqtt_and_counts_bad_input(ros_graph, broker, observer, wait_for):
-    node = ros_graph.bridge("robot_0", "broker_url:=" + broker.url, "compact_indexes:=false")
+    # no navigation publishes robot_0's footprint here: with advertise_footprint on, each message would wait
+    # EVIDENCE_WAIT s for one (issue 43), which test_bridge_node_footprints.py and test_fleet_crashes.py cover
+    node = ros_graph.bridge("robot_0", "broker_url:=" + broker.url, "compact_indexes:=false",
+                            "advertise_footprint:=false")
     probe = ros_graph.probe("robot_0")
     wait_for(lambda: observer.on("ADV:Identity/"), timeout=15, what="bridge online")
 

@@ -22,7 +22,7 @@ def wire(update, compact=True):
 
 @pytest.mark.parametrize("compact", [True, False])
 def test_obstacle_survives_the_wire_with_every_field(make_update, compact):
-    update = make_update(version=7, deadline=1, marked=(0, 5, 3999999), cleared=())
+    update = make_update(version=7, deadline=1, marked=(880220, 880269, 958269), cleared=())   # the rectangle's corners
     obj = wire(update, compact)
     assert obj["objectId"] == update.uuid and obj["coreType"] == "CoatyObject"
     assert obj["objectType"] == OT and "parentObjectId" not in obj
@@ -32,13 +32,14 @@ def test_obstacle_survives_the_wire_with_every_field(make_update, compact):
 def test_plain_and_compact_index_forms_mean_the_same_set(make_update):
     update = make_update()
     assert isinstance(wire(update, True)["markedIndexes"], str)
-    assert wire(update, False)["markedIndexes"] == [2001000, 2001001, 2003002]
+    assert wire(update, False)["markedIndexes"] == [880221, 880222, 882223]
     assert obstacle_from_object(wire(update, True), OT) == obstacle_from_object(wire(update, False), OT)
 
 
 def test_javascript_integers_are_accepted_for_float_fields(make_update):
     obj = wire(make_update(), False)
-    obj.update(resolution=1, origin=[0, -3], rectangle=[0, 0, 2, 2], stamp=12, version=2.0)
+    obj.update(resolution=1, origin=[0, -3], rectangle=[0, 0, 2, 2], stamp=12, version=2.0, markedIndexes=[6000],
+               clearedIndexes=[6001])
     update = obstacle_from_object(obj, OT)
     assert update.resolution == 1.0 and isinstance(update.resolution, float)
     assert update.origin_y == -3.0 and update.rectangle == (0.0, 0.0, 2.0, 2.0)
@@ -47,8 +48,8 @@ def test_javascript_integers_are_accepted_for_float_fields(make_update):
 
 def test_duplicate_indexes_collapse_to_a_set(make_update):
     obj = wire(make_update(), False)
-    obj["markedIndexes"] = [7, 3, 7]
-    assert obstacle_from_object(obj, OT).marked == (3, 7)
+    obj["markedIndexes"] = [880223, 880221, 880223]
+    assert obstacle_from_object(obj, OT).marked == (880221, 880223)
 
 
 @pytest.mark.parametrize("key", REQUIRED)
@@ -102,7 +103,7 @@ def test_bad_field_values_raise_errors_naming_them(make_update, key, value, erro
 
 
 def test_index_count_is_bounded_by_the_grid_and_the_limit(make_update):
-    obj = wire(make_update(size_x=4, size_y=2, marked=(0,), cleared=(), rectangle=(-10, -20, -9.9, -19.95)), False)
+    obj = wire(make_update(size_x=4, size_y=2, marked=(0,), cleared=(), rectangle=(-10, -20, -9.8, -19.9)), False)
     obj["markedIndexes"] = list(range(8))
     assert len(obstacle_from_object(obj, OT).marked) == 8
     obj["markedIndexes"] = list(range(8)) + [1]
@@ -181,3 +182,22 @@ def test_resolve_keeps_good_obstacles_next_to_bad_ones(make_update):
 def test_identity_object_is_a_coaty_identity():
     assert codec.identity_object(IDENT.upper(), "robot_3") == {
         "objectType": "coaty.Identity", "coreType": "Identity", "objectId": IDENT, "name": "robot_3"}
+
+
+def test_a_one_cell_rectangle_carrying_a_region_is_refused_before_its_cells_are_decoded(make_update):
+    """The count of cells against the rectangle (issue 43, item 1) is what refuses the bomb *before expansion*:
+    its compact string is longer than one cell can take, so it is not even base64-decoded. Every other check
+    (cells outside the rectangle, and the count again after decoding) would refuse it only once all its cells are
+    built. Its tail is made invalid base64 here: refused on the count, the reason says so; decoded first, the
+    tail would be the reason (red with the codec's count check removed)."""
+    from coaty_bridge.errors import RectangleCellsError
+    region = tuple(880221 + dx + 2000 * dy for dx in range(40) for dy in range(40))
+    bomb = make_update(rectangle=(1.05, 2.0, 1.1, 2.05), marked=region, cleared=())   # cell 880221's square
+    obj = wire(bomb)
+    assert isinstance(obj["markedIndexes"], str) and len(obj["markedIndexes"]) > 12   # one 5-byte varint's worth
+    obj["markedIndexes"] = obj["markedIndexes"][:-4] + "!!!!"
+    with pytest.raises(RectangleCellsError, match="more cells than its rectangle holds"):
+        obstacle_from_object(obj, OT)
+    obj["rectangle"] = [1.05, 2.0, 3.05, 4.0]          # the region's rectangle: now the tail is what is wrong
+    with pytest.raises(WrongTypeError, match="not base64"):
+        obstacle_from_object(obj, OT)

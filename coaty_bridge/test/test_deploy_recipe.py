@@ -137,8 +137,7 @@ def test_readme_recipe_as_written(deployed):
         time.sleep(0.8)
         forger.loop_stop()
         forger.disconnect()
-        # (the forger's login is robot_1's, so it took robot_1's client id for a moment: robot_1
-        # reconnected and robot_0 answered its Discover with the update again)
+        # (the forger's login is robot_1's; with another client id it is a second connection beside robot_1's)
         assert forged.uuid not in {u.uuid for u in got_1}, "robot_1 took an obstacle published under robot_0's sourceId"
         # no certificate, no connection
         plain = _make_paho_client("nocert-" + uuidlib.uuid4().hex[:8])

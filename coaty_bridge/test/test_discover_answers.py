@@ -183,7 +183,7 @@ def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_
     """One Resolve per obstacle cost a joining robot a message per obstacle per robot answering; the answers now
     go as RESOLVE_BATCH obstacles per Resolve (``relatedObjects``), fewer when max_payload_bytes is reached."""
     from coaty_bridge.client import RESOLVE_BATCH, RESOLVE_BATCH_BYTES
-    many = [make_update(source="robot_0", marked=(2001000 + 3 * i,)) for i in range(150)]
+    many = [make_update(source="robot_0", marked=(880220 + i % 50 + 2000 * (i // 50),)) for i in range(150)]
     holder = start_listening(make_client, wait_for, "robot_0", **FAST_PEERS)
     holder.set_current_obstacles(many)
     joiner = make_client("robot_1", **FAST_PEERS)
@@ -202,7 +202,7 @@ def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_
 
     small = dict(FAST_PEERS, max_payload_bytes=2000)   # a few obstacles per Resolve
     holder_small = start_listening(make_client, wait_for, "robot_2", **small)
-    holder_small.set_current_obstacles([make_update(source="robot_2", marked=(2001000 + 3 * i,)) for i in range(20)])
+    holder_small.set_current_obstacles([make_update(source="robot_2", marked=(880220 + i % 50 + 2000 * (i // 50),)) for i in range(20)])
     joiner_small = make_client("robot_3", **small)
     wait_for(lambda: len(joiner_small.received_updates) == 20, what="all 20 at the second joiner")
     sent = counter(holder_small, "resolves_sent")

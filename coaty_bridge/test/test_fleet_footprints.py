@@ -1,5 +1,6 @@
 """Fleet robots' footprints (issue 12, part 5): the Coaty object, its validation, the table of
 heard robots with its timeout (pure), and two bridges advertising over a real mosquitto."""
+import dataclasses
 import json
 import math
 import uuid as uuidlib
@@ -174,7 +175,8 @@ def test_footprint_advert_reaches_the_peer_not_itself(make_fleet_client, observe
     b.note_own_position((4.0, 6.0))   # robot_1 stands in the same 10 m area as robot_0's SQUARE
     mine = make(robot="robot_0")
     wait_for(lambda: a.publish_footprint(mine) and b.footprints, what="robot_1 hears robot_0")
-    assert b.footprints[0] == (mine, a.identity_id)
+    # the advert carries robot_0's sensor reach (issue 43: the evidence its obstacles are judged by)
+    assert b.footprints[0] == (dataclasses.replace(mine, reach=a.config.sensor_reach), a.identity_id)
     # The observer's copy and robot_0's own echo may come after robot_1's copy on a loaded machine.
     wait_for(lambda: observer.on("ADV::" + OT), what="the observer's copy of the advert")
     wait_for(lambda: a.counters()["echoes_suppressed"] >= 1, what="robot_0's own echo, suppressed")
@@ -182,11 +184,11 @@ def test_footprint_advert_reaches_the_peer_not_itself(make_fleet_client, observe
     assert topic == "coaty/3/fleet/ADV::%s.area_0_0/%s" % (OT, a.identity_id)
     assert data["object"]["objectType"] == OT + ".area_0_0"
     assert data["object"]["objectId"] == a.footprint_object_id
-    assert data["object"]["footprint"] == [list(p) for p in SQUARE]
+    assert data["object"]["footprint"] == [list(p) for p in SQUARE] and data["object"]["reach"] == 4.0
     assert a.footprints == [] and a.counters()["echoes_suppressed"] >= 1
     published = a.counters()["footprints_published"]
     assert a.counters()["footprint_bytes_published"] == published * len(
-        fp.footprint_payload(mine, a.footprint_object_id, OT + ".area_0_0"))
+        fp.footprint_payload(dataclasses.replace(mine, reach=4.0), a.footprint_object_id, OT + ".area_0_0"))
     assert "bytes_published" not in a.counters()      # obstacle traffic is counted apart
 
 

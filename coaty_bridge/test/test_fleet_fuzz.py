@@ -34,11 +34,19 @@ HANDLER = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.a
 WAIT = 20.0  # generous bound on a condition; the test waits for the condition, not the time
 
 
+def inside(rectangle, count=2):
+    """The first ``count`` cells of fleet_probe's map inside ``rectangle`` (issue 43: every cell of a message lies
+    inside its rectangle)."""
+    x0, y0 = int(round((rectangle[0] - OX) / RES)), int(round((rectangle[1] - OY) / RES))
+    return tuple(y0 * SX + x0 + k for k in range(count))
+
+
 def peer_update(**fields):
     values = dict(uuid=str(uuidlib.uuid4()), source="peer_js", version=1, stamp=time.time(), frame_id="map",
                   deadline=600, rectangle=(0.0, 0.0, 0.5, 0.5), resolution=RES, origin_x=OX, origin_y=OY,
-                  size_x=SX, size_y=SY, marked=(2105, 2106), cleared=())
+                  size_x=SX, size_y=SY, cleared=())
     values.update(fields)
+    values.setdefault("marked", inside(values["rectangle"]))
     return codec.ObstacleUpdate(**values)
 
 
@@ -149,7 +157,7 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     # wrong geometry: valid by the rules, refused by both handlers (geometry_mismatch)
     for i in range(20):
         fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(
-            peer_update(resolution=0.1, size_x=100, size_y=50, marked=(i,)), OT)))
+            peer_update(resolution=0.1, size_x=100, size_y=50, marked=(51 * 50 + i % 5,)), OT)))
     fleet.assert_alive("wrong geometry")
 
     # stale deadlines: 0 (expires on arrival), and a Resolve to a Discover nobody pending sent
@@ -166,7 +174,7 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
         fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(dup, OT)))
     for version, source in ((1, "peer_b"), (5, "peer_c"), (3, "peer_js")):
         fleet.publish(adv_topic(), adv_payload(codec.obstacle_to_object(
-            peer_update(uuid=dup.uuid, version=version, source=source, marked=(2110,),
+            peer_update(uuid=dup.uuid, version=version, source=source, marked=inside((1.0, 0.0, 1.5, 0.5), 3)[2:],
                         rectangle=(1.0, 0.0, 1.5, 0.5)), OT)))
     for robot in ROBOTS:
         fleet.wait_list(robot, lambda uuids: dup.uuid in uuids, "%s holds the duplicated obstacle" % robot)
@@ -177,7 +185,7 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     unknown = str(uuidlib.uuid4())
     for robot in ROBOTS:
         fleet.command({"cmd": "publish", "robot": robot, "topic": "obstacle_updates", "msg": dict(
-            uuid=unknown, marked_indexes=[7], version=2, source=robot, deadline=60,
+            uuid=unknown, marked_indexes=list(inside((0.0, 0.0, 0.5, 0.5), 1)), version=2, source=robot, deadline=60,
             rectangle_shape=[0.0, 0.0, 0.5, 0.5], resolution=RES, origin_x=OX, origin_y=OY,
             size_x=SX, size_y=SY, stamp=10.0)})
     late = peer_update(version=9, rectangle=(3.0, 0.0, 3.5, 0.5))
@@ -228,7 +236,7 @@ def test_no_burst_of_bad_input_stops_delivery_to_either_robot(ros_graph, broker,
     fleet.assert_alive("whole-map AddObstacle")
 
     # bad messages straight onto the handlers' from_fleet (what a buggy bridge could send)
-    base = dict(marked_indexes=[2200], version=1, source="robot_9", deadline=60,
+    base = dict(marked_indexes=list(inside((0.0, 2.0, 0.5, 2.4), 1)), version=1, source="robot_9", deadline=60,
                 rectangle_shape=[0.0, 2.0, 0.5, 2.4], resolution=RES, origin_x=OX, origin_y=OY,
                 size_x=SX, size_y=SY, stamp=5.0)
     bad_uuids = []

@@ -42,7 +42,7 @@ def test_monitoring_updates_reach_the_robots_around_the_obstacle_and_first_share
 
     # a monitoring update (it marks): only the robots around the obstacle's area hear it. Sent until
     # the near robot has it: its subscription to the area may still be on its way to the broker.
-    second = marking(make_update, first, 2, (2001500,))
+    second = marking(make_update, first, 2, (880250,))
     wait_for(lambda: source.publish_obstacle(second) and 2 in versions(near, first.uuid), what="v2 near")
     wait_for(lambda: 2 in versions(unplaced, first.uuid), what="v2 at the robot without a position")
     time.sleep(0.3)
@@ -50,7 +50,7 @@ def test_monitoring_updates_reach_the_robots_around_the_obstacle_and_first_share
     assert source.counters()["published_to_area"] >= 1 and source.counters()["published_fleet_wide"] == 1
 
     # an update that only clears may end the obstacle: every robot
-    third = make_update(uuid=first.uuid, version=3, marked=(), cleared=(2001000,), deadline=50)
+    third = make_update(uuid=first.uuid, version=3, marked=(), cleared=(880221,), deadline=50)
     assert source.publish_obstacle(third)
     wait_for(lambda: 3 in versions(far, first.uuid) and 3 in versions(near, first.uuid), what="the clear everywhere")
 
@@ -70,7 +70,7 @@ def test_without_obstacle_areas_every_update_goes_to_every_robot(make_client, ma
     far.note_own_position(FAR)
     first = make_update(version=1)
     wait_for(lambda: source.publish_obstacle(first) and versions(far, first.uuid) == [1], what="v1")
-    source.publish_obstacle(marking(make_update, first, 2, (2001500,)))
+    source.publish_obstacle(marking(make_update, first, 2, (880250,)))
     wait_for(lambda: 2 in versions(far, first.uuid), what="v2 at the far robot")
     assert source.counters().get("published_to_area", 0) == 0
 
@@ -92,7 +92,7 @@ def test_far_copies_are_renewed_before_their_lease_runs_out(broker, make_client,
         first = make_update(version=1, deadline=20)        # far copies: until 1020
         wait_for(lambda: source.publish_obstacle(first) and versions(far, first.uuid) == [1], what="v1")
         now[0] = 1005.0
-        assert source.publish_obstacle(marking(make_update, first, 2, (2001500,), deadline=20))  # near: 1025
+        assert source.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=20))  # near: 1025
         assert source.counters()["published_to_area"] == 1
         now[0] = 1010.0
         assert source.renew_due() == 0, "renewed long before the far copies expire"
@@ -119,9 +119,9 @@ def test_a_renewal_covered_by_a_fleet_wide_update_is_not_sent(broker, make_updat
         first = make_update(version=1, deadline=20)
         source.publish_obstacle(first)
         now[0] = 1005.0
-        source.publish_obstacle(marking(make_update, first, 2, (2001500,), deadline=20))
+        source.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=20))
         # a later update the whole fleet heard, lasting as long: nothing to renew
-        source.publish_obstacle(make_update(uuid=first.uuid, version=3, marked=(), cleared=(2001000,), deadline=20))
+        source.publish_obstacle(make_update(uuid=first.uuid, version=3, marked=(), cleared=(880221,), deadline=20))
         now[0] = 1030.0
         assert source.renew_due() == 0
     finally:
@@ -166,7 +166,7 @@ def test_an_area_update_queued_offline_goes_out_aged_under_its_area_objecttype(m
     client.note_own_position((5.0, 5.0))
     first = make_update(version=1, deadline=60)
     client.publish_obstacle(first)                                    # queued, fleet-wide
-    client.publish_obstacle(marking(make_update, first, 2, (2001500,), deadline=60))   # queued, to its area
+    client.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=60))   # queued, to its area
     now[0] += 5.0
     sent = []
     client._send = lambda topic, payload, **kwargs: sent.append((topic, json.loads(payload)))

@@ -115,12 +115,13 @@ def test_partition_heals_and_lists_converge_without_resurrecting_cleared_cells(f
             wait_for(lambda: r0.client.subscribed and r1.client.subscribed, "both connected and subscribed")
             x = r0.share([0.0, 0.0, 0.5, 0.5])
             wait_for(lambda: converged(r0, r1) and r1.state(), "x on both")
-            cleared_cell = x.marked[0]
+            cleared_cell, remarked_cell = x.marked[:2]
 
             proxy.cut()
             wait_for(lambda: not r1.client.connected, "robot_1 cut off")
             y = r0.share([2.0, 2.0, 2.5, 2.5])                        # a new share
-            r0.update(x.uuid, marked=(5050,), cleared=(cleared_cell,))  # an update and a clear
+            r0.update(x.uuid, cleared=(cleared_cell, remarked_cell))  # a clear ...
+            r0.update(x.uuid, marked=(remarked_cell,))                # ... and an update marking one again
             z = r0.share([3.5, 3.5, 4.0, 4.0])                        # beyond merge_distance of y
             r0.update(z.uuid, cleared=z.marked)                       # z emptied entirely
             assert len(r1.state()) == 1, "robot_1 must not have heard anything while cut off"
@@ -130,7 +131,7 @@ def test_partition_heals_and_lists_converge_without_resurrecting_cleared_cells(f
             held = dict((u, cells) for u, _, cells in r1.state())
             # z, every cell of it cleared, is listed by neither robot (issue 26: evidence ends an obstacle)
             assert set(held) == {x.uuid, y.uuid}
-            assert cleared_cell not in held[x.uuid] and 5050 in held[x.uuid]
+            assert cleared_cell not in held[x.uuid] and remarked_cell in held[x.uuid]
             assert r1.handler.get(z.uuid).cells == () and r0.handler.get(z.uuid).cells == ()  # held until its lease ends
             assert r1.client.counters()["reconnects"] >= 1
         finally:
@@ -148,11 +149,11 @@ def test_broker_restart_with_a_share_in_flight_loses_nothing(fleet):
     # the broker is gone; robot_0 shares and updates meanwhile (queued), then it comes back
     wait_for(lambda: not r0.client.connected and not r1.client.connected, "both notice the broker is gone")
     y = r0.share([2.0, 2.0, 2.5, 2.5])
-    r0.update(x.uuid, marked=(4040,))
+    r0.update(x.uuid, cleared=x.marked[:1])
     with Broker(port=port):
         wait_for(lambda: converged(r0, r1) and len(r1.state()) == 2, "lists equal after the broker restart")
     held = dict((u, cells) for u, _, cells in r1.state())
-    assert y.uuid in held and 4040 in held[x.uuid]
+    assert y.uuid in held and x.marked[0] not in held[x.uuid] and x.marked[1] in held[x.uuid]
 
 
 def test_robot_restart_gets_live_obstacles_back_but_not_expired_or_cleared_ones(fleet):

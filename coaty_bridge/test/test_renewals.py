@@ -24,7 +24,7 @@ def payload_of(updates):
 
 
 def test_a_renewals_event_means_the_obstacles_it_carries_at_a_third_of_their_bytes(make_update):
-    updates = [make_update(version=v, deadline=600 + v, marked=(2001000 + v,), cleared=(2003002,))
+    updates = [make_update(version=v, deadline=600 + v, marked=(880221 + v,), cleared=(882223,))
                for v in range(2, 12)]
     data = payload_of(updates)
     content = renewals.decode_renewals(data, OT)
@@ -61,11 +61,11 @@ def test_a_bad_renewals_event_is_refused_naming_the_field(make_update, change, e
 @pytest.mark.parametrize("entry, shown", [
     ("not a list", "is not \\[uuid"),
     ([1, 2, 3], "is not \\[uuid"),
-    (["not-a-uuid", 2, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [2001000], []], "objectId"),
-    ([None, 2, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [2001000], []], "objectId"),
-    ([str(uuidlib.uuid4()), 0, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [2001000], []], "version"),
-    ([str(uuidlib.uuid4()), 2, float("nan"), 60, [1.0, 2.0, 3.5, 4.0], [2001000], []], "stamp"),
-    ([str(uuidlib.uuid4()), 2, 1700000000.5, 60, [1.0, 2.0], [2001000], []], "rectangle"),
+    (["not-a-uuid", 2, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [880221], []], "objectId"),
+    ([None, 2, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [880221], []], "objectId"),
+    ([str(uuidlib.uuid4()), 0, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [880221], []], "version"),
+    ([str(uuidlib.uuid4()), 2, float("nan"), 60, [1.0, 2.0, 3.5, 4.0], [880221], []], "stamp"),
+    ([str(uuidlib.uuid4()), 2, 1700000000.5, 60, [1.0, 2.0], [880221], []], "rectangle"),
     ([str(uuidlib.uuid4()), 2, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], [4000000], []], "index|outside"),
     ([str(uuidlib.uuid4()), 2, 1700000000.5, 60, [1.0, 2.0, 3.5, 4.0], "%%%", []], "compact|base64"),
 ])
@@ -104,7 +104,7 @@ def test_the_renewals_a_bridge_has_due_go_out_in_one_event(broker, make_client, 
                                                                           if u.uuid == f.uuid], what="v1")
         for k, first in enumerate(firsts):
             now[0] = 1010.0 + 5 * k          # each monitored in its area: near copies until 1110..1120
-            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(2001500,), cleared=(),
+            assert source.publish_obstacle(make_update(uuid=first.uuid, version=2, marked=(880250,), cleared=(),
                                                        deadline=100))
         assert source.counters()["published_to_area"] == 3
         now[0] = 1080.0

@@ -22,9 +22,10 @@ import uuid as uuidlib
 
 import pytest
 
-from coaty_bridge import codec
+from coaty_bridge import codec, footprint as fp
 from coaty_bridge.client import BridgeConfig, _make_paho_client
 from coaty_bridge.identity import identity_for
+from coaty_bridge.topics import Topic
 from coaty_bridge.security import MONITOR, FleetCredentials, read_password_file
 
 import polling
@@ -102,7 +103,8 @@ def launch_bridge_params(robot, credentials):
     name:=value; test_secure_launch.py in fleet_tests checks the launch against this list."""
     return ["broker_url_param:=/fleet/broker_url", "insecure:=false", "authenticate_sources:=true",
             "password_file:=%s/robots/%s.password" % (credentials, robot),
-            "footprint_topic:=move_base/global_costmap/footprint", "footprint_rate:=2.0", "robot_timeout:=3.0"]
+            "footprint_topic:=move_base/global_costmap/footprint", "footprint_rate:=2.0", "robot_timeout:=3.0",
+            "require_evidence:=true", "sensor_reach:=4.0", "max_sensor_reach:=4.0"]
 
 
 class Lines:
@@ -180,13 +182,34 @@ class SecureFleet:
     def from_fleet(self, robot):
         return [e["msg"] for e in list(self.probe.events) if e.get("event") == "from_fleet" and e["robot"] == robot]
 
+    def pose(self, robot, stamp=100.5):
+        """robot's footprint at (0.5, 0.5), stamped like ros_msg's obstacles, on its footprint topic: its bridge sends
+        it with the next obstacle, the evidence the launch's require_evidence asks for (issue 43)."""
+        self.probe.send({"cmd": "footprint", "robot": robot, "frame_id": "map", "stamp": stamp,
+                         "points": [[0.2, 0.2], [0.8, 0.2], [0.8, 0.8], [0.2, 0.8]]})
+        adverts = len(self.footprint_adverts(robot))
+        self.probe.expect(lambda e: e.get("event") == "sent", what="footprint sent")
+        self.probe.events[:] = [e for e in self.probe.events if e.get("event") != "sent"]
+        # the footprint topic and to_fleet are two topics: the bridge has the pose once it advertised it
+        wait_until(lambda: len(self.footprint_adverts(robot)) > adverts, "%s advertising its footprint" % robot)
+
+    def footprint_adverts(self, robot):
+        return [t for t in self.watcher.topics() if "/ADV::%s" % fp.DEFAULT_FOOTPRINT_OBJECT_TYPE in t
+                and t.endswith(identity_for(NS, robot))]
+
     def fresh_obstacle_arrives(self, sender="robot_0", receiver="robot_1", within=1.0):
         msg = ros_msg(sender)
+        self.pose(sender)
         self.probe.send({"cmd": "to_fleet", "robot": sender, "msg": msg})
         self.probe.expect(lambda e: e.get("event") == "sent", what="sent")
         start = time.monotonic()
-        wait_until(lambda: any(m["uuid"] == msg["uuid"] for m in self.from_fleet(receiver)),
-                   "%s's fresh obstacle at %s" % (sender, receiver), timeout=5)
+        try:
+            wait_until(lambda: any(m["uuid"] == msg["uuid"] for m in self.from_fleet(receiver)),
+                       "%s's fresh obstacle at %s" % (sender, receiver), timeout=5)
+        except AssertionError:
+            diagnostics = [s for e in self.probe.events if e.get("event") == "diagnostics" for s in e["status"]]
+            raise AssertionError("%s's fresh obstacle did not reach %s; last diagnostics %s" % (
+                sender, receiver, diagnostics[-2:])) from None
         assert time.monotonic() - start <= within, "fresh obstacle took %.2f s" % (time.monotonic() - start)
         self.probe.events[:] = [e for e in self.probe.events if e.get("event") != "sent"]
 
@@ -226,6 +249,10 @@ def test_b_a_robot_cannot_publish_under_another_robots_source_id(secure_fleet):
     under_victim = obstacle("robot_0")                  # robot_0's sourceId and name: the ACL's job
     forged_name = obstacle("robot_0")                   # own sourceId, robot_0's name: the bridges' job
     honest = obstacle("robot_2")                        # sent last by the same client: arrives after
+    evidence = fp.RobotFootprint(robot="robot_2", stamp=100.5, frame_id="map", reach=4.0,
+                                 points=((0.2, 0.2), (0.8, 0.2), (0.8, 0.8), (0.2, 0.8)))   # where it saw it
+    robot_2.publish(str(Topic(NS, "ADV", login, object_type=fp.DEFAULT_FOOTPRINT_OBJECT_TYPE)),
+                    fp.footprint_payload(evidence, str(uuidlib.uuid4())))
     robot_2.publish(*adv(victim_id, under_victim))
     robot_2.publish(*adv(login, forged_name))
     robot_2.publish(*adv(login, honest))

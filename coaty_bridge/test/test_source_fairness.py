@@ -8,7 +8,7 @@ import pytest
 
 from coaty_bridge import codec
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
-from coaty_bridge.fairness import FairQueue
+from sharing_msgs.authority import FairQueue
 from coaty_bridge.topics import Topic
 
 OT = codec.DEFAULT_OBJECT_TYPE

@@ -59,6 +59,19 @@ def rect(min_x, min_y, max_x, max_y):
     return Rectangle(float(min_x), float(min_y), float(max_x), float(max_y))
 
 
+def cells_in(rectangle, count=None, geometry=GRID):
+    """The first ``count`` (all when None) cell indexes of ``geometry`` whose centre lies inside ``rectangle``:
+    cells a message may carry with that rectangle (issue 43: every cell inside its rectangle)."""
+    cells = geometry.cells_in(rectangle)
+    return tuple(cells if count is None else cells[:count])
+
+
+def cell_in(rectangle, k, geometry=GRID):
+    """The k-th cell (wrapping) inside ``rectangle``: abstract cell numbers of a test made concrete."""
+    cells = geometry.cells_in(rectangle)
+    return cells[k % len(cells)]
+
+
 def proposal(cells=(10, 11, 12), rectangle=None, geometry=GRID, source="robot_0"):
     return Obstacle(uuid="", marked=tuple(cells), cleared=(), deadline=0,
                     rectangle=rectangle or rect(-10, -5, -9, -4), source=source, geometry=geometry,

@@ -33,6 +33,18 @@ EXT1 = "00000000-0000-4000-8000-00000000e001"
 SHORT1 = "00000000-0000-4000-8000-00000000e002"
 
 
+def at(x, y):
+    """The cell whose centre is nearest (x, y) on the test map: every cell of a message lies inside its
+    rectangle (issue 43)."""
+    return int(round((y - OY) / RES - 0.5)) * SX + int(round((x - OX) / RES - 0.5))
+
+
+P = at(0.025, 0.025)     # the first cell of the own obstacle's rectangle (0, 0, 0.5, 0.5); P + k along x
+Q = at(0.525, 0.275)     # inside (0.25, 0.25, 1.0, 1.0), outside (0, 0, 0.5, 0.5)
+E = at(2.025, 0.025)     # the first cell of ext-1's rectangle (2.0, 0.0, 2.5, 0.5)
+S = at(3.225, 0.025)     # the first cell of short-1's rectangle (3.2, 0.0, 3.7, 0.5)
+
+
 def obstacle(uuid="", marked=(), cleared=(), deadline=30, rect=(0.0, 0.0, 0.5, 0.5), source="robot_1",
              version=1, grid=(RES, OX, OY, SX, SY)):
     msg = SharedObstacle()
@@ -71,7 +83,7 @@ class Bus:
         sub(NS + "to_fleet", SharedObstacle, self._rec(self.fleet), queue_size=1000)
         sub(NS + "expired_obstacles", String, lambda m: self._rec(self.expired)(m.data), queue_size=100)
         sub(NS + "shared_obstacle_list", SharedObstacleArray, self._on_list, queue_size=10)
-        # fleet_obstacle_markers is subscribed late, in test_06b (a late subscriber's first, latched array)
+        # fleet_obstacle_markers is subscribed late, in test_06b (the first array a late subscriber gets)
         self.first_markers = None
         self.markers = None
         sub("/diagnostics", DiagnosticArray, self._on_diag, queue_size=100)
@@ -146,17 +158,17 @@ class TestHandlerNode(unittest.TestCase):
 
     def test_01_proposal_is_authorised_back_to_the_layer_and_out_to_the_fleet(self):
         bus = self.bus
-        bus.proposals.publish(obstacle(marked=(305, 303, 304), rect=(0.0, 0.0, 0.5, 0.5),
+        bus.proposals.publish(obstacle(marked=(P + 5, P + 3, P + 4), rect=(0.0, 0.0, 0.5, 0.5),
                                        source="robot_0", version=0, deadline=0))
         wait_for(lambda: bus.shared and bus.fleet, what="the authorised obstacle")
         shared = bus.shared[0]
         self.assertRegex(shared.uuid, UUID4)
         self.assertEqual((shared.version, shared.source, shared.deadline), (1, "robot_0", 60))
-        self.assertEqual(list(shared.marked_indexes), [305, 303, 304])
+        self.assertEqual(list(shared.marked_indexes), [P + 5, P + 3, P + 4])
         self.assertEqual(bus.fleet[0].uuid, shared.uuid)
         wait_for(lambda: shared.uuid in bus.listed(), what="the latched list")
         listed = bus.listed()[shared.uuid]
-        self.assertEqual(list(listed.marked_indexes), [303, 304, 305])
+        self.assertEqual(list(listed.marked_indexes), [P + 3, P + 4, P + 5])
         self.assertEqual(list(listed.cleared_indexes), [])
         self.assertEqual((listed.version, listed.source), (1, "robot_0"))
         self.assertTrue(55 <= listed.deadline <= 60, listed.deadline)
@@ -164,25 +176,25 @@ class TestHandlerNode(unittest.TestCase):
 
     def test_02_overlapping_proposal_is_an_update_of_the_live_obstacle(self):
         bus = self.bus
-        bus.proposals.publish(obstacle(marked=(310,), rect=(0.25, 0.25, 1.0, 1.0), source="robot_0",
+        bus.proposals.publish(obstacle(marked=(Q,), rect=(0.25, 0.25, 1.0, 1.0), source="robot_0",
                                        version=0, deadline=0))
         wait_for(lambda: bus.counter("merged_proposals") == 1, what="merged_proposals = 1 on /diagnostics")
         self.assertEqual(bus.counter("proposals"), 2)
         wait_for(lambda: (len(bus.shared), len(bus.fleet)) == (2, 2), what="the update to the layer and fleet")
         for m in (bus.shared[1], bus.fleet[1]):
-            self.assertEqual((m.uuid, m.version, list(m.marked_indexes)), (self.own.uuid, 2, [310]))
+            self.assertEqual((m.uuid, m.version, list(m.marked_indexes)), (self.own.uuid, 2, [Q]))
             self.assertEqual(list(m.rectangle_shape), [0.0, 0.0, 1.0, 1.0])
-        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [303, 304, 305, 310],
+        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [P + 3, P + 4, P + 5, Q],
                  what="the merged cells in the list")
 
     def test_03_internal_update_goes_to_the_fleet_and_is_applied_not_echoed(self):
         bus = self.bus
-        bus.updates.publish(obstacle(uuid=self.own.uuid, marked=(306,), cleared=(303,), version=2,
+        bus.updates.publish(obstacle(uuid=self.own.uuid, marked=(P + 6,), cleared=(P + 3,), version=2,
                                      source="robot_0", deadline=60, rect=(0.0, 0.0, 0.5, 0.5)))
         wait_for(lambda: len(bus.fleet) == 3, what="the update on to_fleet")
         # version 2 is taken (the merged proposal): re-stamped 3
         self.assertEqual((bus.fleet[2].uuid, bus.fleet[2].version), (self.own.uuid, 3))
-        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [304, 305, 306, 310],
+        wait_for(lambda: list(bus.listed()[self.own.uuid].marked_indexes) == [P + 4, P + 5, P + 6, Q],
                  what="the update applied in the list")
         self.assertEqual(bus.listed()[self.own.uuid].version, 3)
         self.assertEqual(len(bus.shared), 2, "internal updates are not sent back to the layer")
@@ -190,12 +202,12 @@ class TestHandlerNode(unittest.TestCase):
     def test_04_external_add_and_update_go_to_the_layer_and_never_back_out(self):
         bus = self.bus
         before = time.time()
-        bus.from_fleet.publish(obstacle(uuid=EXT1, marked=(1000, 1001, 1002), version=1, deadline=30,
+        bus.from_fleet.publish(obstacle(uuid=EXT1, marked=(E, E + 1, E + 2), version=1, deadline=30,
                                         rect=(2.0, 0.0, 2.5, 0.5), source="robot_1"))
         wait_for(lambda: EXT1 in bus.listed(), what="ext-1 in the list")
-        bus.from_fleet.publish(obstacle(uuid=EXT1, marked=(1002, 1003), cleared=(1000,), version=2,
+        bus.from_fleet.publish(obstacle(uuid=EXT1, marked=(E + 2, E + 3), cleared=(E,), version=2,
                                         deadline=30, rect=(2.0, 0.0, 2.5, 0.5), source="robot_2"))
-        wait_for(lambda: list(bus.listed()[EXT1].marked_indexes) == [1001, 1002, 1003],
+        wait_for(lambda: list(bus.listed()[EXT1].marked_indexes) == [E + 1, E + 2, E + 3],
                  what="ext-1 updated")
         self.assertEqual([m.uuid for m in bus.shared[2:]], [EXT1, EXT1])
         self.assertEqual([m.version for m in bus.shared[2:]], [1, 2])
@@ -206,12 +218,12 @@ class TestHandlerNode(unittest.TestCase):
         index = [o.uuid for o in reply.obstacles].index(EXT1)
         self.assertAlmostEqual(reply.arrival_times[index], before, delta=2.0)
         self.assertTrue(27 < reply.remaining_seconds[index] <= 30, reply.remaining_seconds[index])
-        self.assertEqual(list(reply.obstacles[index].marked_indexes), [1001, 1002, 1003])
+        self.assertEqual(list(reply.obstacles[index].marked_indexes), [E + 1, E + 2, E + 3])
         self.assertEqual(sorted(o.uuid for o in reply.obstacles), sorted([self.own.uuid, EXT1]))
 
     def test_05_bad_fleet_messages_are_dropped_logged_and_counted(self):
         bus = self.bus
-        good = dict(uuid=EXT1, marked=(1500,), version=5, source="robot_9", deadline=30,
+        good = dict(uuid=EXT1, marked=(E + 5,), version=5, source="robot_9", deadline=30,
                     rect=(2.0, 0.0, 2.5, 0.5))
         bad = {
             "empty_uuid": dict(uuid=""),
@@ -245,7 +257,7 @@ class TestHandlerNode(unittest.TestCase):
                 self.assertTrue(lines and "robot_9" in lines[0], (reason, bus.rosout[-12:]))
         # the node is still alive and applies the next good message
         bus.from_fleet.publish(obstacle(**good))
-        wait_for(lambda: 1500 in bus.listed()[EXT1].marked_indexes, what="the good message")
+        wait_for(lambda: E + 5 in bus.listed()[EXT1].marked_indexes, what="the good message")
 
     def test_06_manual_add_is_shared_like_a_detection(self):
         bus = self.bus
@@ -265,11 +277,11 @@ class TestHandlerNode(unittest.TestCase):
     def test_06b_the_fleets_obstacles_are_drawn_for_rviz_with_source_age_time_left_and_cells(self):
         bus = self.bus
         # Nobody has looked at the markers so far: a late subscriber (RViz started now) gets the obstacles
-        # held now as its first, latched array, not the empty one from before the first share.
+        # held now as its first array, not an empty one from before the first share.
         held = len(self.list_srv().obstacles)
         self.assertGreater(held, 0)
         bus.subscribe_markers()
-        wait_for(lambda: bus.first_markers is not None, what="the latched fleet_obstacle_markers")
+        wait_for(lambda: bus.first_markers is not None, what="the first fleet_obstacle_markers a late subscriber gets")
         self.assertEqual(len(bus.labels(bus.first_markers)), held, bus.labels(bus.first_markers))
         wait_for(lambda: bus.list and bus.list.obstacles and len(bus.labels()) == len(bus.list.obstacles),
                  what="one label per listed obstacle on fleet_obstacle_markers")
@@ -315,15 +327,19 @@ class TestHandlerNode(unittest.TestCase):
     def test_07_expiry_tells_the_layer_and_sends_nothing_to_the_fleet(self):
         bus = self.bus
         fleet_before = len(bus.fleet)
-        bus.from_fleet.publish(obstacle(uuid=SHORT1, marked=(2000,), version=1, deadline=1,
-                                        rect=(3.2, 0.0, 3.7, 0.5), source="robot_3"))  # beyond merge_distance of ext-1
+        first = obstacle(uuid=SHORT1, marked=(S,), version=1, deadline=1, rect=(3.2, 0.0, 3.7, 0.5),
+                         source="robot_3")   # beyond merge_distance of ext-1
+        bus.from_fleet.publish(first)
         wait_for(lambda: SHORT1 in bus.listed(), what="short-1 in the list")
         wait_for(lambda: SHORT1 in bus.expired, timeout=4, what="short-1 on expired_obstacles")
         wait_for(lambda: SHORT1 not in bus.listed(), what="short-1 gone from the list")
         self.assertEqual(len(bus.fleet), fleet_before)
-        # a late message for it does not bring it back
-        bus.from_fleet.publish(obstacle(uuid=SHORT1, marked=(2001,), version=2, deadline=1,
-                                        rect=(3.2, 0.0, 3.7, 0.5), source="robot_4"))
+        # a late message for it (made before it expired here) does not bring it back (one made after it would:
+        # the robot that sees it again shares it again, issue 43)
+        late = obstacle(uuid=SHORT1, marked=(S + 1,), version=2, deadline=1, rect=(3.2, 0.0, 3.7, 0.5),
+                        source="robot_4")
+        late.header.stamp = first.header.stamp
+        bus.from_fleet.publish(late)
         wait_for(lambda: bus.counter("dropped_expired") == 1, what="dropped_expired = 1")
         self.assertNotIn(SHORT1, bus.listed())
         self.assertEqual(bus.counter("expired"), 1)
@@ -345,7 +361,7 @@ class TestHandlerNode(unittest.TestCase):
         ext = [o for o in doc["obstacles"] if o["uuid"] == EXT1][0]
         self.assertEqual(doc["robot"], "robot_0")
         self.assertEqual(ext["source"], "robot_1")
-        self.assertEqual(ext["cells"], [1001, 1002, 1003, 1500])
+        self.assertEqual(ext["cells"], [E + 1, E + 2, E + 3, E + 5])
         os.unlink(path)
 
     def test_10_a_flooding_sources_excess_is_dropped_counted_per_source_and_named(self):

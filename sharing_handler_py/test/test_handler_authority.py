@@ -5,7 +5,7 @@ import logging
 
 import pytest
 
-from handler_fixtures import U, GRID, Recorder, proposal, rect, state, update
+from handler_fixtures import U, GRID, Recorder, cell_in, cells_in, proposal, rect, state, update
 from sharing_handler_py.errors import InvalidRequestError
 from sharing_msgs import obstacle_rules
 
@@ -15,8 +15,8 @@ WHOLE_MAP = rect(-10, -5, 10, 5)   # GRID is 20 m x 10 m
 def _loaded(**kwargs):
     """robot_0 holding one own and one external obstacle, 10.6 m apart."""
     r = Recorder(max_cells_per_message=100000, **kwargs)
-    r.handler.on_proposal(proposal(cells=(1, 2), rectangle=rect(-9, -4, -8.5, -3.5)))
-    r.handler.on_external(update(U("good"), marked=(5, 6), version=1, source="robot_1",
+    r.handler.on_proposal(proposal(cells=cells_in(rect(-9, -4, -8.5, -3.5), 2), rectangle=rect(-9, -4, -8.5, -3.5)))
+    r.handler.on_external(update(U("good"), marked=cells_in(rect(1.6, -4, 2.1, -3.5), 2), version=1, source="robot_1",
                                  rectangle=rect(1.6, -4, 2.1, -3.5), stamp=r.clock.now))
     return r
 
@@ -32,7 +32,8 @@ def _dropped_once(r, reason, caplog, value_text):
 
 def _still_works(r):
     """A fresh valid obstacle is taken, and the good ones are as they were."""
-    assert r.handler.on_external(update(U("fresh"), marked=(9000,), version=1, source="robot_1",
+    assert r.handler.on_external(update(U("fresh"), marked=cells_in(rect(2, 2, 2.5, 2.5), 1), version=1,
+                                        source="robot_1",
                                         rectangle=rect(2, 2, 2.5, 2.5), stamp=r.clock.now))
     assert U("fresh") in r.handler
 
@@ -46,7 +47,8 @@ def _still_works(r):
 def test_a_peer_obstacle_beyond_the_caps_is_dropped_counted_and_named(what, fields, reason, value_text, caplog):
     r = _loaded()
     before = state(r.handler)
-    values = dict(marked=(100,), version=1, source="robot_9", rectangle=rect(0, 0, 1, 1), stamp=r.clock.now)
+    values = dict(marked=cells_in(rect(0, 0, 1, 1), 1), version=1, source="robot_9", rectangle=rect(0, 0, 1, 1),
+                  stamp=r.clock.now)
     values.update(fields)
     with caplog.at_level(logging.INFO, logger="sharing_handler_py"):
         assert r.handler.on_external(update(U("evil"), **values)) is False, what
@@ -75,28 +77,36 @@ def test_the_proposal_path_is_capped_too():
 
 def test_a_merge_never_makes_an_obstacle_larger_than_the_caps(caplog):
     """An attacker's 10 m obstacle (within the cap) beside good ones: without the merge cap the
-    smaller uuid absorbs them all into something 11+ m long (issue 27: 20 obstacles became 1)."""
+    smaller uuid absorbs them all into something 11+ m long (issue 27: 20 obstacles became 1). Its
+    own smaller obstacles beside it are not absorbed beyond the cap; other robots' never merge with it
+    (issue 43, test below)."""
     r = _loaded()
     before = state(r.handler)
-    evil = update(U("0evil"), marked=(300,), version=1, source="robot_9", rectangle=rect(-8.7, -4, 1.3, 4),
-                  stamp=r.clock.now)
+    evil = update(U("0evil"), marked=cells_in(rect(-8.7, -4, 1.3, 4), 1), version=1, source="robot_9",
+                  rectangle=rect(-8.7, -4, 1.3, 4), stamp=r.clock.now)
+    beside = [update(U("1evil-%d" % i), marked=cells_in(area, 1), version=1, source="robot_9", rectangle=area,
+                     stamp=r.clock.now) for i, area in enumerate((rect(1.6, 0, 2.1, 0.5), rect(-9.4, 0, -9.0, 0.5)))]
     with caplog.at_level(logging.WARNING, logger="sharing_handler_py"):
-        assert r.handler.on_external(evil)
+        for message in [evil] + beside:
+            assert r.handler.on_external(message)
     held = {h.uuid: h for h in r.handler.obstacles()}
     assert U("0evil") in held and held[U("0evil")].rectangle == evil.rectangle
-    assert [h for h in state(r.handler) if h[0] != U("0evil")] == before   # nothing absorbed or changed
+    assert all(m.uuid in held for m in beside)
+    assert [h for h in state(r.handler) if h[0] in (U("good"),)] == [h for h in before if h[0] == U("good")]
     assert r.handler.counters["merges_refused"] >= 2 and r.handler.counters["merged_obstacles"] == 0
     assert any("not merged" in rec.getMessage() and U("0evil") in rec.getMessage() for rec in caplog.records)
     # and a proposal beside it is not swallowed either: it becomes an obstacle of its own
-    shared = r.handler.on_proposal(proposal(cells=(2000,), rectangle=rect(1.5, 0, 2, 0.5)))
+    shared = r.handler.on_proposal(proposal(cells=cells_in(rect(1.5, 0, 2, 0.5), 1), rectangle=rect(1.5, 0, 2, 0.5)))
     assert shared.uuid not in (U("0evil"),) and shared.version == 1
     assert max(h.rectangle.max_x - h.rectangle.min_x for h in r.handler.obstacles()) <= 10.0
 
 
 def test_merging_below_the_caps_still_happens():
     r = Recorder()
-    r.handler.on_external(update(U("a"), marked=(1,), version=1, rectangle=rect(0, 0, 1, 1), stamp=r.clock.now))
-    r.handler.on_external(update(U("b"), marked=(2,), version=1, rectangle=rect(1.2, 0, 2, 1), stamp=r.clock.now))
+    r.handler.on_external(update(U("a"), marked=cells_in(rect(0, 0, 1, 1), 1), version=1, rectangle=rect(0, 0, 1, 1),
+                                 stamp=r.clock.now))
+    r.handler.on_external(update(U("b"), marked=cells_in(rect(1.2, 0, 2, 1), 1), version=1,
+                                 rectangle=rect(1.2, 0, 2, 1), stamp=r.clock.now))
     assert len(r.handler) == 1 and r.handler.counters["merged_obstacles"] == 1
 
 
@@ -104,8 +114,10 @@ def test_add_obstacle_never_returns_none_when_the_update_it_becomes_is_refused()
     """The crash of issue 27: add_manual returned None ('NoneType' object has no attribute 'uuid')
     when the obstacle it merges into is at the last version."""
     r = Recorder(max_version_step=obstacle_rules.MAX_VERSION)
-    r.handler.on_external(update(U("top"), marked=(1,), version=obstacle_rules.MAX_VERSION,
-                                 rectangle=rect(0, 0, 1, 1), stamp=r.clock.now))
+    cells = cells_in(rect(0, 0, 1, 1), 2)
+    top = r.handler.on_proposal(proposal(cells=cells[:1], rectangle=rect(0, 0, 1, 1)))
+    r.handler.on_internal_update(update(top.uuid, marked=cells[1:], version=obstacle_rules.MAX_VERSION,
+                                        source="robot_0", rectangle=rect(0, 0, 1, 1), stamp=r.clock.now))
     with pytest.raises(InvalidRequestError, match="refused"):
         r.handler.add_manual([0.5, 0.5, 1.5, 1.5])
     assert r.handler.counters["dropped_bad_version"] == 1
@@ -130,17 +142,36 @@ def test_a_huge_deadline_is_cut_to_our_obstacle_duration():
     assert r.handler.expire() == [U("a")]
 
 
-def test_a_message_that_does_not_mark_cells_keeps_the_earlier_expiry():
-    """Only an observation renews. A clear or a stale copy can bring the expiry closer, never push
-    it back (the bridge README's 'keeps the earliest expiry')."""
+def test_a_message_that_does_not_mark_cells_never_changes_the_lease():
+    """Only an observation renews, and a clear never shortens the lease of the rest (issue 43, item 3: one
+    cleared cell with deadline 1 shortened a real block's lease to 1 s, and it was gone fleet-wide)."""
     r = Recorder(duration=60)
     r.handler.on_external(update(U("a"), marked=(1, 2), version=1, deadline=30, stamp=r.clock.now))  # 130
     r.clock.now += 10
     assert r.handler.on_external(update(U("a"), cleared=(7,), version=2, deadline=60, stamp=r.clock.now))
     assert r.handler.get(U("a")).remaining == pytest.approx(20.0), "a clear must not extend the lease"
-    assert r.handler.on_external(update(U("a"), cleared=(8,), version=3, deadline=5, stamp=r.clock.now))
-    assert r.handler.get(U("a")).remaining == pytest.approx(5.0), "the earlier expiry is kept"
-    assert r.handler.get(U("a")).cells == (1, 2)
+    assert r.handler.on_external(update(U("a"), cleared=(1,), version=3, deadline=1, stamp=r.clock.now))
+    assert r.handler.get(U("a")).remaining == pytest.approx(20.0), "a clear must not shorten the lease"
+    assert r.handler.get(U("a")).cells == (2,), "the cell it saw free is gone, the rest stays"
+    assert r.handler.counters["clears_kept_lease"] == 2
+    r.clock.now += 19.9
+    assert r.handler.expire() == []
+    r.clock.now += 0.1
+    assert r.handler.expire() == [U("a")]
+
+
+def test_a_copy_restoring_state_adds_an_obstacle_but_never_renews_one():
+    """Discover answers are no observation (issue 43, item 4: re-marks pinned obstacles): on_state adds what
+    is not held, with the copy's deadline, and never pushes a held obstacle's expiry back."""
+    r = Recorder(duration=60)
+    assert r.handler.on_state(update(U("a"), marked=(1,), version=1, deadline=30, stamp=r.clock.now))
+    assert r.handler.get(U("a")).remaining == pytest.approx(30.0)
+    r.clock.now += 10
+    assert r.handler.on_state(update(U("a"), marked=(2,), version=2, deadline=60, stamp=r.clock.now))
+    assert r.handler.get(U("a")).remaining == pytest.approx(20.0) and r.handler.get(U("a")).cells == (1, 2)
+    assert r.handler.on_external(update(U("a"), marked=(3,), version=3, deadline=60, stamp=r.clock.now))
+    assert r.handler.get(U("a")).remaining == pytest.approx(60.0), "a live observation does renew"
+    assert r.handler.counters["state_copies"] == 2
 
 
 # ----------------------------------------------------------------------------- replay (item 7)
@@ -191,7 +222,7 @@ def test_tombstones_outlast_the_stamp_window():
 def test_a_lone_surrogate_is_refused_at_validation_with_a_clear_error(field, caplog):
     r = _loaded()
     before = state(r.handler)
-    bad = update(U("evil"), marked=(100,), version=1, source="robot_9", stamp=r.clock.now)
+    bad = update(U("evil"), marked=(10,), version=1, source="robot_9", stamp=r.clock.now)
     bad = bad.replace(**{field: (bad.source if field == "source" else "map") + "\ud800"})
     with caplog.at_level(logging.WARNING, logger="sharing_handler_py"):
         assert r.handler.on_external(bad) is False

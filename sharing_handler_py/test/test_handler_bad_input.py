@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from handler_fixtures import U, GRID, OTHER_GRID, Recorder, proposal, rect, state, update
+from handler_fixtures import U, GRID, OTHER_GRID, Recorder, cells_in, proposal, rect, state, update
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError
 from sharing_handler_py.logic import DROP_REASONS
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
@@ -13,7 +13,7 @@ from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rec
 def _loaded():
     """A handler holding one own and one external obstacle."""
     r = Recorder(max_cells_per_message=1000)
-    r.handler.on_proposal(proposal(cells=(1, 2), rectangle=rect(0, 0, 1, 1)))
+    r.handler.on_proposal(proposal(cells=cells_in(rect(0, 0, 1, 1), 2), rectangle=rect(0, 0, 1, 1)))
     r.handler.on_external(update(U("ext-1"), marked=(5, 6), version=1, source="robot_1"))
     return r
 

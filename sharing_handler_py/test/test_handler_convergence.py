@@ -6,7 +6,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from handler_fixtures import U, Recorder, proposal, rect, state, update
+from handler_fixtures import U, Recorder, cell_in, proposal, rect, state, update
 
 EXAMPLES = settings(max_examples=500, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -27,35 +27,55 @@ UNCAPPED = dict(merge_distance=MERGE, max_obstacle_extent=1000.0)
 
 
 
+SOURCES = ["robot_1", "robot_2", "robot_3", "robot_4"]
+
+
+def inside(cells, rectangle):
+    """Abstract cell numbers of a draw made concrete: cells inside the message's rectangle (issue 43)."""
+    return tuple(cell_in(rectangle, k) for k in cells)
+
+
 @st.composite
 def fleet_messages(draw):
     """Messages about up to four uuids from up to four robots, with clashing stamps, different
-    metadata and rectangles that overlap, touch within merge_distance or lie apart."""
+    metadata and rectangles that overlap, touch within merge_distance or lie apart. Each uuid has one
+    creator, the source of its first shares (version 1), as in a fleet; later versions come from anyone."""
+    uuids = [U("u1"), U("u2"), U("u3"), U("u4")]
+    creators = {u: draw(st.sampled_from(SOURCES)) for u in uuids}
     msgs = []
     for _ in range(draw(st.integers(1, 12))):
         marked, cleared = draw(CHANGES)
-        msgs.append(update(uuid=draw(st.sampled_from([U("u1"), U("u2"), U("u3"), U("u4")])), marked=marked,
-                           cleared=cleared, version=draw(st.integers(1, 4)),
-                           source=draw(st.sampled_from(["robot_1", "robot_2", "robot_3", "robot_4"])),
-                           deadline=draw(st.sampled_from([30, 60])),
-                           rectangle=draw(st.sampled_from(RECTANGLES))))
+        uuid, version, rectangle = draw(st.sampled_from(uuids)), draw(st.integers(1, 4)), draw(st.sampled_from(RECTANGLES))
+        msgs.append(update(uuid=uuid, marked=inside(marked, rectangle), cleared=inside(cleared, rectangle),
+                           version=version, source=creators[uuid] if version == 1 else draw(st.sampled_from(SOURCES)),
+                           deadline=draw(st.sampled_from([30, 60])), rectangle=rectangle))
     return msgs
+
+
+def creator_of(msgs, uuid):
+    """Oracle: the source of the uuid's first share, or None when none of its messages is one."""
+    firsts = sorted(m.source for m in msgs if m.uuid == uuid and m.version == 1)
+    return firsts[0] if firsts else None
 
 
 def merged_groups(msgs):
     """Oracle, independent of the handler: the uuids that end as one obstacle. Each uuid's
-    rectangle is the union of its messages' rectangles; groups whose union rectangles overlap
-    or lie within MERGE join, until none do."""
+    rectangle is the union of its messages' rectangles; groups of the same known creator (issue 43:
+    provenance) whose union rectangles overlap or lie within MERGE join, until none do."""
     groups = {}
     for m in msgs:
         groups.setdefault(frozenset([m.uuid]), []).append(m.rectangle)
     boxes = {g: _union(rs) for g, rs in groups.items()}
+    creators = {g: creator_of(msgs, min(g)) for g in boxes}
     joined = True
     while joined:
         joined = False
         for a in sorted(boxes, key=sorted):
             for b in sorted(boxes, key=sorted):
-                if a != b and (boxes[a].overlaps(boxes[b]) or boxes[a].gap(boxes[b]) <= MERGE):
+                if a != b and creators[a] is not None and creators[a] == creators[b] and (
+                        boxes[a].overlaps(boxes[b]) or boxes[a].gap(boxes[b]) <= MERGE):
+                    creators[a | b] = creators.pop(a)
+                    creators.pop(b)
                     boxes[a | b] = boxes.pop(a).union(boxes.pop(b))
                     joined = True
                     break
@@ -163,8 +183,9 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
         i = data.draw(st.integers(0, n - 1))
         h = robots[i].handler
         if kind == "propose":
-            shared = h.on_proposal(proposal(cells=data.draw(CELLS.filter(bool)), source="robot_%d" % i,
-                                            rectangle=data.draw(st.sampled_from(RECTANGLES))))
+            rectangle = data.draw(st.sampled_from(RECTANGLES))
+            shared = h.on_proposal(proposal(cells=inside(data.draw(CELLS.filter(bool)), rectangle),
+                                            source="robot_%d" % i, rectangle=rectangle))
             if shared is not None and shared.version == 1:
                 authorised.add(shared.uuid)
         elif kind == "update" and h.obstacles():
@@ -172,7 +193,8 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
             # the layer usually sends max+1; a stale version exercises the re-stamp guard
             version = held.version + data.draw(st.sampled_from([1, 1, 0, -1]))
             marked, cleared = data.draw(CHANGES)
-            h.on_internal_update(update(held.uuid, marked=marked, cleared=cleared,
+            h.on_internal_update(update(held.uuid, marked=inside(marked, held.rectangle),
+                                        cleared=inside(cleared, held.rectangle),
                                         version=max(version, 0), source="robot_%d" % i,
                                         deadline=held.deadline, rectangle=held.rectangle))
         elif kind == "deliver" and pending:
@@ -216,40 +238,40 @@ def test_robots_proposing_updating_and_exchanging_converge_and_loss_only_loses_w
 
 @EXAMPLES
 @given(first=st.permutations([0, 1, 2]), order=st.data())
-def test_simultaneous_proposals_of_one_obstacle_end_as_one_obstacle_on_every_robot(first, order):
-    """Two robots propose the same obstacle before hearing of each other: each authorises its
-    own uuid; every robot, whatever the delivery order, ends holding one obstacle, the smaller
-    uuid, with the cells of both, living as long as the later lease."""
+def test_simultaneous_proposals_of_one_obstacle_end_as_the_same_two_obstacles_on_every_robot(first, order):
+    """Two robots propose the same obstacle before hearing of each other: each authorises its own uuid;
+    every robot, whatever the delivery order, ends holding both, each under the robot that sent its
+    cells (issue 43: a merge never shows a source that did not send the cells), each with its lease."""
     robots = [Recorder("robot_%d" % i, uuids="r%d" % i) for i in range(3)]
     a = robots[0].handler.on_proposal(proposal(cells=(1, 2, 3), source="robot_0"))
     b = robots[1].handler.on_proposal(proposal(cells=(2, 3, 4), source="robot_1"))
     msgs = [(a, 1), (a, 2), (b, 0), (b, 2)]
     for m, j in order.draw(st.permutations(msgs)):
         robots[j].handler.on_external(m)
-    survivor = min(a.uuid, b.uuid)
     for r in robots:
-        assert [(h.uuid, h.source, h.cells) for h in r.handler.obstacles()] == [(survivor, "robot_0", (1, 2, 3, 4))]
-        assert r.handler.resolve(a.uuid) == r.handler.resolve(b.uuid) == survivor
+        assert [(h.uuid, h.source, h.cells) for h in r.handler.obstacles()] == sorted(
+            [(a.uuid, "robot_0", (1, 2, 3)), (b.uuid, "robot_1", (2, 3, 4))])
     for r in robots:
         r.clock.now += 59.9
         assert r.handler.expire() == []
         r.clock.now += 0.1
-        assert r.handler.expire() == [survivor]
+        assert r.handler.expire() == sorted([a.uuid, b.uuid])
         assert len(r.handler) == 0
         assert r.handler.is_tombstoned(a.uuid) and r.handler.is_tombstoned(b.uuid)
 
 
-def test_after_hearing_of_an_obstacle_a_robot_updates_it_instead_of_proposing_a_new_one():
-    """The other order of the race: the share arrives first, so the second proposal becomes an
-    update of it and the fleet ends with one obstacle."""
+def test_after_hearing_of_another_robots_obstacle_a_robot_shares_its_own_cells_under_its_own_name():
+    """The other order of the race: the share arrives first. The second robot's proposal beside it is
+    its own obstacle (it was an update of the first before issue 43, which put its cells under the
+    first robot's name and renewed the first robot's lease); both robots end with the same two."""
     r0, r1 = Recorder("robot_0", uuids="r0"), Recorder("robot_1", uuids="r1")
     a = r0.handler.on_proposal(proposal(cells=(1, 2), source="robot_0"))
     r1.handler.on_external(a)
-    merged = r1.handler.on_proposal(proposal(cells=(2, 3), source="robot_1"))
-    assert merged.uuid == a.uuid and merged.version == 2
-    r0.handler.on_external(merged)
+    b = r1.handler.on_proposal(proposal(cells=(2, 3), source="robot_1"))
+    assert b.uuid != a.uuid and (b.version, b.source) == (1, "robot_1")
+    r0.handler.on_external(b)
     assert state(r0.handler) == state(r1.handler)
-    assert r0.handler.get(a.uuid).cells == (1, 2, 3)
+    assert [(h.source, h.cells) for h in r0.handler.obstacles()] == [("robot_0", (1, 2)), ("robot_1", (2, 3))]
 
 
 LEASE_DEADLINES = st.sampled_from([5, 30, 60])
@@ -264,7 +286,7 @@ def test_leases_the_greatest_arrival_plus_deadline_wins_whatever_the_order(data)
     msgs = data.draw(st.lists(st.tuples(st.sampled_from([U("u1"), U("u2")]), LEASE_DEADLINES,
                                         st.sampled_from(RECTANGLES[:3]), st.integers(1, 4)),
                               min_size=1, max_size=8), label="messages")
-    obstacles = [update(uuid, marked=(v,), version=v, source="robot_%d" % v, deadline=d, rectangle=rc)
+    obstacles = [update(uuid, marked=inside((v,), rc), version=v, source="robot_%d" % v, deadline=d, rectangle=rc)
                  for uuid, d, rc, v in msgs]
     r = Recorder("observer", **UNCAPPED)
     latest = {}

@@ -4,7 +4,7 @@ import re
 
 import pytest
 
-from handler_fixtures import U, GRID, FakeClock, Recorder, proposal, rect, state, update
+from handler_fixtures import U, GRID, FakeClock, Recorder, cell_in, cells_in, proposal, rect, state, update
 from sharing_handler_py.errors import InvalidRequestError
 from sharing_handler_py.logic import SharingHandler
 
@@ -37,38 +37,48 @@ def test_overlapping_proposal_becomes_an_update_of_the_live_obstacle(caplog):
     its uuid, the proposal's cells, the union rectangle and a renewed lease, sent to the fleet
     and to the layer (which does not know its proposal became an update)."""
     r = Recorder(duration=60)
-    first = r.handler.on_proposal(proposal(cells=(1, 2), rectangle=rect(0, 0, 2, 2)))
+    one, two, three = cell_in(rect(0, 0, 1, 1), 0), cell_in(rect(1, 1, 2, 2), 0), cell_in(rect(2, 2, 3, 3), 0)
+    first = r.handler.on_proposal(proposal(cells=(one, two), rectangle=rect(0, 0, 2, 2)))
     r.clock.now += 20
     with caplog.at_level(logging.INFO, logger="sharing_handler_py"):
-        merged = r.handler.on_proposal(proposal(cells=(2, 3), rectangle=rect(1, 1, 3, 3)))
+        merged = r.handler.on_proposal(proposal(cells=(two, three), rectangle=rect(1, 1, 3, 3)))
     assert (merged.uuid, merged.version, merged.source) == (first.uuid, 2, "robot_0")
-    assert (merged.marked, merged.cleared, merged.deadline) == ((2, 3), (), 60)
+    assert (merged.marked, merged.cleared, merged.deadline) == ((two, three), (), 60)
     assert merged.rectangle == rect(0, 0, 3, 3)
     assert r.fleet == [first, merged] and r.layer == [first, merged]
     held = r.handler.get(first.uuid)
-    assert (held.cells, held.rectangle, held.remaining) == ((1, 2, 3), rect(0, 0, 3, 3), 60)
+    assert (held.cells, held.rectangle, held.remaining) == ((one, two, three), rect(0, 0, 3, 3), 60)
     assert len(r.handler) == 1
     assert r.handler.counters["merged_proposals"] == 1 and r.handler.counters["authorised"] == 1
     lines = [rec.getMessage() for rec in caplog.records if "merge_distance" in rec.getMessage()]
     assert len(lines) == 1 and first.uuid in lines[0]
 
 
-def test_proposal_near_an_external_obstacle_updates_it():
+def test_a_proposal_near_another_robots_obstacle_is_an_obstacle_of_its_own():
+    """Issue 43, item 2: a proposal that became an update of another robot's obstacle showed this robot's
+    cells under that robot's name and renewed its whole lease. Now it is this robot's own obstacle; near
+    one of its own it is still an update of that one (above)."""
     r = Recorder()
-    r.handler.on_external(update(U("ext-1"), marked=(5,), version=3, rectangle=rect(0, 0, 2, 2)))
-    merged = r.handler.on_proposal(proposal(cells=(7,), rectangle=rect(2.3, 0, 4, 1)))
-    assert (merged.uuid, merged.version) == (U("ext-1"), 4)
-    assert r.handler.get(U("ext-1")).cells == (5, 7)
+    theirs, ours = cell_in(rect(0, 0, 2, 2), 0), cell_in(rect(2.3, 0, 4, 1), 0)
+    r.handler.on_external(update(U("ext-1"), marked=(theirs,), version=1, rectangle=rect(0, 0, 2, 2)))
+    r.clock.now += 20
+    shared = r.handler.on_proposal(proposal(cells=(ours,), rectangle=rect(2.3, 0, 4, 1)))
+    assert shared.uuid != U("ext-1") and (shared.version, shared.source) == (1, "robot_0")
+    assert r.handler.get(U("ext-1")).cells == (theirs,) and r.handler.get(U("ext-1")).source == "robot_1"
+    assert r.handler.get(U("ext-1")).remaining == pytest.approx(10.0), "not renewed by another robot's proposal"
+    assert r.handler.get(shared.uuid).cells == (ours,)
+    assert r.handler.counters["merged_proposals"] == 0
 
 
 def test_a_proposal_beyond_merge_distance_is_a_new_obstacle():
     r = Recorder(merge_distance=0.5)
-    first = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
-    second = r.handler.on_proposal(proposal(rectangle=rect(1.6, 0, 2, 1)))
+    first = r.handler.on_proposal(proposal(cells=cells_in(rect(0, 0, 1, 1), 3), rectangle=rect(0, 0, 1, 1)))
+    second = r.handler.on_proposal(proposal(cells=cells_in(rect(1.6, 0, 2, 1), 3), rectangle=rect(1.6, 0, 2, 1)))
     assert second.uuid != first.uuid and second.version == 1
     assert len(r.handler) == 2
     # 0.5 m from both: it joins them into one, the smaller uuid (uuid4s: either may be smaller)
-    assert r.handler.on_proposal(proposal(rectangle=rect(1, 1.5, 2, 2))).uuid == min(first.uuid, second.uuid)
+    third = proposal(cells=cells_in(rect(1, 1.5, 2, 2), 3), rectangle=rect(1, 1.5, 2, 2))
+    assert r.handler.on_proposal(third).uuid == min(first.uuid, second.uuid)
     assert len(r.handler) == 1 and r.handler.counters["merged_obstacles"] == 1
 
 
@@ -96,11 +106,11 @@ def test_internal_update_is_sent_to_the_fleet_before_it_is_applied():
     shared = r.handler.on_proposal(proposal(cells=(10, 11)))
     seen_at_send = []
     r.handler._to_fleet = lambda o: seen_at_send.append(r.handler.get(o.uuid).cells)
-    sent = r.handler.on_internal_update(update(shared.uuid, marked=(20,), cleared=(10,), version=2,
+    sent = r.handler.on_internal_update(update(shared.uuid, marked=(19,), cleared=(10,), version=2,
                                                source="robot_0"))
     assert seen_at_send == [(10, 11)]
     assert sent.version == 2 and sent.source == "robot_0"
-    assert r.handler.get(shared.uuid).cells == (11, 20)
+    assert r.handler.get(shared.uuid).cells == (11, 19)
     assert r.handler.get(shared.uuid).version == 2
     assert len(r.layer) == 1, "an internal update is not echoed to the layer"
     assert r.handler.counters["updates_out"] == 1
@@ -109,23 +119,23 @@ def test_internal_update_is_sent_to_the_fleet_before_it_is_applied():
 def test_internal_update_with_a_stale_version_is_restamped_above_the_max_seen(caplog):
     r = Recorder()
     shared = r.handler.on_proposal(proposal(cells=(10,)))
-    r.handler.on_external(update(shared.uuid, marked=(30,), version=7, source="robot_1"))
+    r.handler.on_external(update(shared.uuid, marked=(15,), version=7, source="robot_1"))
     with caplog.at_level(logging.DEBUG, logger="sharing_handler_py"):
-        sent = r.handler.on_internal_update(update(shared.uuid, marked=(40,), cleared=(30,),
+        sent = r.handler.on_internal_update(update(shared.uuid, marked=(18,), cleared=(15,),
                                                    version=3, source="robot_0"))
     assert sent.version == 8
     assert r.fleet[-1].version == 8
-    assert r.handler.get(shared.uuid).cells == (10, 40)
+    assert r.handler.get(shared.uuid).cells == (10, 18)
     assert r.handler.counters["restamped"] == 1
     assert any("re-stamped 8" in rec.getMessage() for rec in caplog.records)
 
 
 def test_internal_update_sends_the_grown_rectangle_and_renews_the_lease_when_it_marks():
     r = Recorder(duration=60)
-    shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    shared = r.handler.on_proposal(proposal(cells=cells_in(rect(0, 0, 1, 1), 3), rectangle=rect(0, 0, 1, 1)))
     r.clock.now += 40
-    sent = r.handler.on_internal_update(update(shared.uuid, marked=(1,), version=2, source="robot_0",
-                                               deadline=0, rectangle=rect(0, 0, 5, 5)))
+    sent = r.handler.on_internal_update(update(shared.uuid, marked=(cell_in(rect(4, 4, 5, 5), 0),), version=2,
+                                               source="robot_0", deadline=0, rectangle=rect(0, 0, 5, 5)))
     assert sent.rectangle == rect(0, 0, 5, 5) and sent.deadline == 60
     held = r.handler.get(shared.uuid)
     assert held.rectangle == rect(0, 0, 5, 5) and held.remaining == 60
@@ -140,9 +150,10 @@ def test_internal_update_that_only_clears_carries_the_lifetime_left_when_it_is_s
     """A robot that missed the first share adds the obstacle from an update: it must not keep
     it longer than the robot that shared it (issue 15, item 2). Only cells seen occupied renew."""
     r = Recorder(duration=60)
-    shared = r.handler.on_proposal(proposal(rectangle=rect(0, 0, 1, 1)))
+    cells = cells_in(rect(0, 0, 1, 1), 3)
+    shared = r.handler.on_proposal(proposal(cells=cells, rectangle=rect(0, 0, 1, 1)))
     r.clock.now += 25.4
-    sent = r.handler.on_internal_update(update(shared.uuid, cleared=(10,), version=2, source="robot_0",
+    sent = r.handler.on_internal_update(update(shared.uuid, cleared=cells[:1], version=2, source="robot_0",
                                                deadline=60, rectangle=rect(0, 0, 1, 1)))
     assert sent.deadline == 34  # 34.6 s left, rounded down
     assert r.handler.counters["renewals"] == 0
@@ -204,10 +215,10 @@ def test_older_update_arriving_late_cannot_undo_a_newer_one():
 
 def test_the_first_share_defines_rectangle_deadline_and_source_even_when_it_arrives_late():
     r = Recorder()
-    r.handler.on_external(update(U("ext-1"), marked=(1,), version=3, source="robot_2", deadline=90,
-                                 rectangle=rect(0, 0, 9, 4.5)))
-    r.handler.on_external(update(U("ext-1"), marked=(2,), version=1, source="robot_1", deadline=30,
-                                 rectangle=rect(0, 0, 1, 1)))
+    r.handler.on_external(update(U("ext-1"), marked=(cell_in(rect(8, 4, 9, 4.5), 0),), version=3, source="robot_2",
+                                 deadline=90, rectangle=rect(0, 0, 9, 4.5)))
+    r.handler.on_external(update(U("ext-1"), marked=(cell_in(rect(0, 0, 1, 1), 0),), version=1, source="robot_1",
+                                 deadline=30, rectangle=rect(0, 0, 1, 1)))
     held = r.handler.get(U("ext-1"))
     assert (held.source, held.deadline, held.rectangle, held.version) == \
         ("robot_1", 30, rect(0, 0, 9, 4.5), 3), "the rectangle is the union of all seen"
@@ -225,7 +236,8 @@ def test_fleet_messages_wait_for_the_grid_and_are_applied_when_the_map_arrives()
 def test_waiting_queue_is_bounded():
     r = Recorder(geometry=None, max_deferred=2)
     for i in range(3):
-        r.handler.on_external(update(U("ext-%d" % i), marked=(1,), version=1, rectangle=rect(3 * i, 0, 3 * i + 1, 1)))
+        r.handler.on_external(update(U("ext-%d" % i), marked=(cell_in(rect(3 * i, 0, 3 * i + 1, 1), 0),), version=1,
+                                     rectangle=rect(3 * i, 0, 3 * i + 1, 1)))
     assert r.handler.counters["dropped_no_geometry"] == 1
     r.handler.set_geometry(GRID)
     assert [h.uuid for h in r.handler.obstacles()] == [U("ext-0"), U("ext-1")]
@@ -272,13 +284,48 @@ def test_late_message_for_an_expired_obstacle_does_not_resurrect_it_until_the_to
     assert not r.handler.is_tombstoned(U("ext-1"))
 
 
-def test_internal_update_for_an_expired_obstacle_is_dropped():
+def test_an_internal_update_that_only_clears_an_expired_obstacle_is_dropped():
     r = Recorder(duration=1)
     shared = r.handler.on_proposal(proposal())
     r.clock.now += 1
     r.handler.expire()
-    assert r.handler.on_internal_update(update(shared.uuid, marked=(1,), source="robot_0")) is None
+    assert r.handler.on_internal_update(update(shared.uuid, cleared=(10,), source="robot_0")) is None
     assert r.handler.counters["dropped_expired"] == 1 and len(r.fleet) == 1
+
+
+def test_a_robot_that_sees_an_expired_obstacle_again_shares_it_again_under_a_new_uuid():
+    """Issue 43, item 3: an obstacle's tombstone stopped the robot that still saw it from sharing it again
+    (nothing came back in 90 s). Its layer marking cells of the expired uuid makes a new obstacle of them."""
+    r = Recorder(duration=1)
+    shared = r.handler.on_proposal(proposal())
+    r.clock.now += 1
+    r.handler.expire()
+    again = r.handler.on_internal_update(update(shared.uuid, marked=(11, 12), cleared=(10,), source="robot_0"))
+    assert again is not None and again.uuid != shared.uuid and again.version == 1
+    assert (again.marked, again.cleared, again.source) == ((11, 12), (), "robot_0")
+    assert r.fleet[-1] == again and r.layer[-1] == again
+    assert r.expired[-1] == shared.uuid, "the layer drops the expired uuid for the new one"
+    assert r.handler.get(again.uuid).cells == (11, 12)
+    assert r.handler.counters["reshared"] == 1 and r.handler.counters["dropped_expired"] == 0
+
+
+
+@pytest.mark.parametrize("left,reshared", [(0.9, True), (1.0, False)])
+def test_a_robot_that_sees_an_obstacle_in_its_last_second_shares_it_again_before_the_tick(left, reshared):
+    """The same when the layer's mark comes while the lease has less than 1 s left and the expiry tick has not
+    run yet (the node test of issue 43, item 3 met this race: the mark was dropped as expired, for good)."""
+    r = Recorder(duration=10)
+    shared = r.handler.on_proposal(proposal())
+    r.clock.now += 10 - left
+    again = r.handler.on_internal_update(update(shared.uuid, marked=(11, 12), source="robot_0"))
+    if reshared:
+        assert again is not None and again.uuid != shared.uuid and again.version == 1
+        assert not r.handler.get(shared.uuid) and r.handler.is_tombstoned(shared.uuid)
+        assert r.expired[-1] == shared.uuid and r.handler.counters["expired"] == 1
+        assert r.handler.counters["reshared"] == 1 and r.handler.counters["dropped_expired"] == 0
+    else:                           # a whole second left: an update of the obstacle as it is
+        assert again is not None and again.uuid == shared.uuid
+        assert r.handler.counters["reshared"] == 0 and r.handler.counters["expired"] == 0
 
 
 # ---------------------------------------------------------------- manual add and list
@@ -293,8 +340,9 @@ def test_manual_add_fills_the_rectangle_and_is_shared_like_a_detection():
 
 def test_manual_add_with_cells_and_deadline():
     r = Recorder()
-    shared = r.handler.add_manual([0, 0, 1, 1], marked=(7, 8), deadline=12)
-    assert (shared.marked, shared.deadline) == ((7, 8), 12)
+    cells = cells_in(rect(0, 0, 1, 1), 2)
+    shared = r.handler.add_manual([0, 0, 1, 1], marked=cells, deadline=12)
+    assert (shared.marked, shared.deadline) == (cells, 12)
 
 
 @pytest.mark.parametrize("kwargs,why", [
@@ -342,8 +390,8 @@ def test_manual_add_without_a_grid_is_refused():
 
 def test_list_holds_full_state_sorted_by_uuid_with_remaining_time():
     r = Recorder(duration=60)
-    r.handler.on_external(update(U("b"), marked=(2,), version=4, deadline=30, source="robot_2",
-                                 rectangle=rect(5, 0, 6, 1)))
+    r.handler.on_external(update(U("b"), marked=(cell_in(rect(5, 0, 6, 1), 0),), version=4, deadline=30,
+                                 source="robot_2", rectangle=rect(5, 0, 6, 1)))
     r.handler.on_external(update(U("a"), marked=(5, 1), cleared=(9,), version=1, deadline=10,
                                  source="robot_1"))
     r.clock.now += 2.5
@@ -397,18 +445,19 @@ def test_an_update_that_clears_the_last_cell_removes_the_obstacle_on_the_sender_
     """Issue 26: evidence ends an obstacle at once, not its lease; the layer gets the clearing update
     (its copy has no cell left to draw) and nobody lists the obstacle any more."""
     a, b = Recorder("robot_0", duration=1200), Recorder("robot_1", duration=1200)
-    shared = a.handler.on_proposal(proposal(cells=(10, 11, 12), rectangle=rect(0, 0, 1, 1)))
+    c10, c11, c12 = cells_in(rect(0, 0, 1, 1), 3)
+    shared = a.handler.on_proposal(proposal(cells=(c10, c11, c12), rectangle=rect(0, 0, 1, 1)))
     b.handler.on_external(shared)
-    part = a.handler.on_internal_update(update(shared.uuid, cleared=(10, 11), version=2, source="robot_0",
+    part = a.handler.on_internal_update(update(shared.uuid, cleared=(c10, c11), version=2, source="robot_0",
                                                rectangle=rect(0, 0, 1, 1)))
     b.handler.on_external(part)
-    assert [h.cells for h in a.handler.obstacles()] == [h.cells for h in b.handler.obstacles()] == [(12,)]
-    last = a.handler.on_internal_update(update(shared.uuid, cleared=(12,), version=3, source="robot_0",
+    assert [h.cells for h in a.handler.obstacles()] == [h.cells for h in b.handler.obstacles()] == [(c12,)]
+    last = a.handler.on_internal_update(update(shared.uuid, cleared=(c12,), version=3, source="robot_0",
                                                rectangle=rect(0, 0, 1, 1)))
-    assert last is not None and last.cleared == (12,)      # it still goes out, so the fleet clears it too
+    assert last is not None and last.cleared == (c12,)      # it still goes out, so the fleet clears it too
     b.handler.on_external(last)
     # the receiver's layer gets the clearing update (the sender's layer made it)
-    assert b.layer[-1].uuid == shared.uuid and b.layer[-1].cleared == (12,)
+    assert b.layer[-1].uuid == shared.uuid and b.layer[-1].cleared == (c12,)
     for r in (a, b):
         assert r.handler.obstacles() == []
         assert r.handler.counters["cleared_by_evidence"] == 1
@@ -432,8 +481,9 @@ def test_remove_by_hand_clears_every_cell_fleet_wide_and_says_who_asked(caplog):
     """Issue 28: remove_obstacle. The removal is this robot's update clearing every present cell: the
     fleet applies it like evidence, so every robot drops the obstacle; this robot's layer is told too."""
     a, b = Recorder("robot_0", duration=1200), Recorder("robot_1", duration=1200)
-    first = a.handler.on_proposal(proposal(cells=(10, 11, 12), rectangle=rect(0, 0, 1, 1)))
-    other = a.handler.on_proposal(proposal(cells=(500,), rectangle=rect(3, 3, 4, 4)))
+    cells = cells_in(rect(0, 0, 1, 1), 3)
+    first = a.handler.on_proposal(proposal(cells=cells, rectangle=rect(0, 0, 1, 1)))
+    other = a.handler.on_proposal(proposal(cells=cells_in(rect(3, 3, 4, 4), 1), rectangle=rect(3, 3, 4, 4)))
     for m in (first, other):
         b.handler.on_external(m)
     with caplog.at_level("INFO"):
@@ -441,7 +491,7 @@ def test_remove_by_hand_clears_every_cell_fleet_wide_and_says_who_asked(caplog):
     assert removed == [first.uuid]
     assert "requested by operator anna" in caplog.text
     out = b.fleet[-1]
-    assert (out.uuid, out.source, out.marked, set(out.cleared)) == (first.uuid, "robot_1", (), {10, 11, 12})
+    assert (out.uuid, out.source, out.marked, set(out.cleared)) == (first.uuid, "robot_1", (), set(cells))
     assert b.layer[-1] == out                     # b's own layer draws it no more
     a.handler.on_external(out)
     for r in (a, b):
@@ -461,7 +511,8 @@ def test_remove_by_hand_clears_every_cell_fleet_wide_and_says_who_asked(caplog):
 def test_a_removal_that_cannot_be_done_says_why_and_changes_nothing(kwargs, reason):
     from sharing_handler_py.errors import InvalidRequestError
     r = Recorder(duration=1200)
-    r.handler.on_external(update(U("a"), marked=(1,), version=1, source="robot_1", rectangle=rect(0, 0, 1, 1)))
+    r.handler.on_external(update(U("a"), marked=cells_in(rect(0, 0, 1, 1), 1), version=1, source="robot_1",
+                                 rectangle=rect(0, 0, 1, 1)))
     before = (r.handler.obstacles(), list(r.fleet), list(r.layer))
     with pytest.raises(InvalidRequestError, match=reason):
         r.handler.remove(**kwargs)

@@ -3,8 +3,8 @@ source. A flooding source's excess is dropped and counted (in all and per source
 source, and the robot itself, goes on as before. Pure; no wall clock (a fake clock)."""
 import logging
 
-from handler_fixtures import U, GRID, Recorder, proposal, rect, update
-from sharing_handler_py import quotas
+from handler_fixtures import GRID, Recorder, U, cells_in, proposal, rect, update
+from sharing_msgs.authority import quotas
 
 
 def far(k, source="robot_9", version=1, stamp=100.0, uuid=None):
@@ -32,7 +32,7 @@ def test_live_obstacle_quota_drops_a_floods_excess_and_counts_it_per_source(capl
     # another source's new obstacle, an update of one robot_9 holds, and this robot's own proposal still go
     assert h.on_external(far(20, source="robot_2"))
     assert h.on_external(far(0, version=2))
-    assert h.on_proposal(proposal(cells=(9000,), rectangle=rect(0, 0, 0.05, 0.05))) is not None
+    assert h.on_proposal(proposal(cells=cells_in(rect(0, 0, 0.05, 0.05), 1), rectangle=rect(0, 0, 0.05, 0.05))) is not None
     assert len(h) == 5
     # one line a field engineer can act on (robot, count, limit), not one per message
     lines = drop_lines(caplog, "source_quota")

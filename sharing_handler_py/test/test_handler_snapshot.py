@@ -4,13 +4,13 @@ import os
 import pytest
 import yaml
 
-from handler_fixtures import U, Recorder, proposal, rect, update
+from handler_fixtures import Recorder, U, cells_in, proposal, rect, update
 from sharing_handler_py import snapshot
 
 
 def test_snapshot_lists_every_obstacle_with_its_cells_and_times():
     r = Recorder(duration=60, uuids="r0")
-    shared = r.handler.on_proposal(proposal(cells=(12, 10), rectangle=rect(0, 0, 1, 1)))
+    shared = r.handler.on_proposal(proposal(cells=cells_in(rect(0, 0, 1, 1), 2), rectangle=rect(0, 0, 1, 1)))
     r.handler.on_external(update(U("ext-1"), marked=(5, 3), version=2, source="robot_1", deadline=30))
     r.clock.now += 10
     doc = yaml.safe_load(snapshot.render("robot_0", r.clock.now, r.handler.obstacles()))

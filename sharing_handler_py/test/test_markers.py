@@ -6,7 +6,7 @@ import rospy
 
 from visualization_msgs.msg import Marker
 
-from handler_fixtures import GRID, Recorder, U, rect, update
+from handler_fixtures import GRID, Recorder, U, cells_in, rect, update
 from sharing_handler_py.markers import NS_CELLS, NS_LABELS, NS_RECTANGLES, label_text, obstacle_markers
 
 
@@ -76,9 +76,9 @@ def rviz_array_problems(array):
 
 def held_two():
     r = Recorder(duration=1200)
-    r.handler.on_external(update(U("a"), marked=(10, 11, 12), version=1, source="robot_1",
+    r.handler.on_external(update(U("a"), marked=cells_in(rect(0, 0, 1, 1), 3), version=1, source="robot_1",
                                  rectangle=rect(0, 0, 1, 1), deadline=1200))
-    r.handler.on_external(update(U("b"), marked=(500,), version=1, source="robot_2",
+    r.handler.on_external(update(U("b"), marked=cells_in(rect(3, 3, 4, 4), 1), version=1, source="robot_2",
                                  rectangle=rect(3, 3, 4, 4), deadline=600))
     r.clock.now += 42.0
     return r
@@ -97,10 +97,11 @@ def test_the_markers_pass_rvizs_checks_and_show_cells_rectangles_and_labels():
     assert sorted(by_ns) == sorted([NS_CELLS, NS_LABELS, NS_RECTANGLES])
     cells = by_ns[NS_CELLS]
     assert [len(m.points) for m in cells] == [3, 1]
-    # cell 10 of the fixtures' grid, at its centre
+    # the first cell of obstacle a on the fixtures' grid, at its centre
+    first = cells_in(rect(0, 0, 1, 1), 3)[0]
     x, y = cells[0].points[0].x, cells[0].points[0].y
-    assert x == GRID.origin_x + (10 % GRID.size_x + 0.5) * GRID.resolution
-    assert y == GRID.origin_y + (10 // GRID.size_x + 0.5) * GRID.resolution
+    assert x == GRID.origin_x + (first % GRID.size_x + 0.5) * GRID.resolution
+    assert y == GRID.origin_y + (first // GRID.size_x + 0.5) * GRID.resolution
     labels = [m.text for m in by_ns[NS_LABELS]]
     assert labels == ["robot_1 · 42 s old · 1158 s left · 3 cells", "robot_2 · 42 s old · 558 s left · 1 cells"]
     assert [(p.x, p.y) for p in by_ns[NS_RECTANGLES][1].points] == [(3, 3), (4, 3), (4, 4), (3, 4), (3, 3)]
@@ -123,7 +124,7 @@ def test_the_oracle_catches_what_rviz_warns_about():
 
 def test_an_obstacle_whose_cells_were_all_seen_free_draws_nothing_and_labels_count_whole_seconds():
     r = held_two()
-    r.handler.on_external(update(U("a"), cleared=(10, 11, 12), version=2, source="robot_1",
+    r.handler.on_external(update(U("a"), cleared=cells_in(rect(0, 0, 1, 1), 3), version=2, source="robot_1",
                                  rectangle=rect(0, 0, 1, 1)))
     array = obstacle_markers(r.handler.obstacles(), r.clock(), "map", rospy.Time(5))
     assert [m.text for m in array.markers if m.ns == NS_LABELS] == ["robot_2 · 42 s old · 558 s left · 1 cells"]

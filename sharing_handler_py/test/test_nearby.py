@@ -6,7 +6,7 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from handler_fixtures import U, Recorder, proposal, rect, update
+from handler_fixtures import Recorder, U, cells_in, proposal, rect, update
 from sharing_handler_py.nearby import MAX_BUCKETS_PER_RECTANGLE, RectangleIndex
 
 COORD = st.floats(-60.0, 60.0, allow_nan=False)
@@ -67,14 +67,14 @@ def test_an_internal_update_that_grows_a_rectangle_next_to_another_merges_them()
     """The layer's own update can grow an obstacle's rectangle (the obstacle grew in view): the
     grown rectangle may now lie within merge_distance of another held obstacle."""
     r = Recorder(merge_distance=0.5)
-    r.handler.on_external(update(U("ext-a"), marked=(5,), version=1, rectangle=rect(3, 0, 4, 1)))
-    mine = r.handler.on_proposal(proposal(cells=(1, 2), rectangle=rect(0, 0, 1, 1)))
+    other = r.handler.on_proposal(proposal(cells=cells_in(rect(3, 0, 4, 1), 1), rectangle=rect(3, 0, 4, 1)))
+    mine = r.handler.on_proposal(proposal(cells=cells_in(rect(0, 0, 1, 1), 2), rectangle=rect(0, 0, 1, 1)))
     assert len(r.handler) == 2
-    sent = r.handler.on_internal_update(update(mine.uuid, marked=(7,), version=2, source="robot_0",
-                                               rectangle=rect(0, 0, 2.7, 1)))
+    sent = r.handler.on_internal_update(update(mine.uuid, marked=cells_in(rect(2.6, 0, 2.7, 1), 1), version=2,
+                                               source="robot_0", rectangle=rect(0, 0, 2.7, 1)))
     assert sent is not None and sent.rectangle == rect(0, 0, 2.7, 1)
-    assert len(r.handler) == 1, "the grown obstacle lies 0.3 m from ext-a: one obstacle"
-    survivor = min(mine.uuid, U("ext-a"))
+    assert len(r.handler) == 1, "the grown obstacle lies 0.3 m from the other: one obstacle"
+    survivor = min(mine.uuid, other.uuid)
     assert r.handler.get(survivor).rectangle == rect(0, 0, 4, 1)
     assert r.handler.counters["merged_obstacles"] == 1
 

@@ -59,6 +59,8 @@ def test_launch_runs_the_secure_default_and_insecure_opts_out(launch, stand_ins,
         assert bridge["insecure"] is False and bridge["authenticate_sources"] is True
         assert bridge["password_file"] == "%s/robots/robot_%d.password" % (folder, i)
         assert bridge["broker_url_param"] == "/fleet/broker_url"
+        # plausible evidence (issue 43), as coaty_bridge/test/test_secure_default.launch_bridge_params
+        assert bridge["require_evidence"] is True and bridge["sensor_reach"] == bridge["max_sensor_reach"] == 4.0
         assert "password" not in bridge and "identity_id" not in bridge and "username" not in bridge
     p = params(env, launch, "robots:=2", "credentials:=/srv/fleet_secrets")
     assert p["/fleet_broker/credentials_dir"] == "/srv/fleet_secrets"
@@ -68,6 +70,7 @@ def test_launch_runs_the_secure_default_and_insecure_opts_out(launch, stand_ins,
     for i in range(2):
         assert p["/robot_%d/coaty_bridge/insecure" % i] is True
         assert p["/robot_%d/coaty_bridge/authenticate_sources" % i] is False
+        assert p["/robot_%d/coaty_bridge/require_evidence" % i] is False
         assert "/robot_%d/coaty_bridge/password_file" % i not in p
 
 
@@ -200,7 +203,7 @@ def test_running_fleet_launch_refuses_anonymous_forged_sources_and_client_id_tak
         time.sleep(0.3)
         assert forged_topic not in watcher.received, "an event under robot_0's sourceId got through"
         robot_1.close()
-        # (c) robot_0's client id (= its login) without its password
+        # (c) robot_0's login as client id, without its password
         deadverts = "coaty/3/%s/DAD/%s" % (NS, ids["robot_0"])
         before = len(heartbeats("robot_0"))
         for kwargs in (dict(client_id=ids["robot_0"]), dict(client_id=ids["robot_0"], username=ids["robot_0"],

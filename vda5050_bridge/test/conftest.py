@@ -13,6 +13,11 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 if SRC not in sys.path:
     sys.path.insert(0, SRC)
+# sharing_msgs' pure helpers (the rules of authority) without a built workspace; appended, so a sourced
+# workspace's sharing_msgs (with the generated msg package) wins.
+MSGS_SRC = os.path.join(os.path.dirname(os.path.dirname(SRC)), "sharing_msgs", "src")
+if MSGS_SRC not in sys.path:
+    sys.path.append(MSGS_SRC)
 
 #: a git clone of github.com/VDA5050/VDA5050 (tag 2.0.0 is read from it) to test against instead of the
 #: shipped 2.0.0 schemas, if any

@@ -8,6 +8,7 @@ directory that stop() removes.
 """
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
@@ -31,6 +32,17 @@ def _keep_user():
         return ""
     import pwd
     return "user %s\n" % pwd.getpwuid(os.geteuid()).pw_name
+
+
+def _die_with_parent():
+    """In the child before exec: mosquitto gets SIGTERM when the process that started it dies, even by SIGKILL, so a
+    killed run_broker leaves no mosquitto holding the fleet's port for the one started again (Linux's
+    PR_SET_PDEATHSIG; elsewhere nothing)."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
 
 
 class BrokerError(RuntimeError):
@@ -104,13 +116,55 @@ class Broker:
                 for line in extra:
                     out.write(line + "\n")
             self._proc = subprocess.Popen([self.binary, "-c", conf], stdin=subprocess.DEVNULL,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=_die_with_parent)
             if self._wait_ready():
                 return self
             last = self._failure_text()
             self._kill()
         self.stop()
         raise BrokerError("mosquitto did not start on %s:%s: %s" % (self.host, self.port, last))
+
+    @property
+    def directory(self):
+        """The broker's private folder (config, log, password file, ACL), or None when stopped."""
+        return self._dir
+
+    @property
+    def pid(self):
+        return self._proc.pid if self._proc is not None else None
+
+    def reload(self):
+        """Has mosquitto read its password file and ACL again (SIGHUP): logins added or rotated take effect
+        for new connections at once, connected clients stay. False when it is not running."""
+        if not self.running():
+            return False
+        self._proc.send_signal(signal.SIGHUP)
+        return True
+
+    def respawn(self):
+        """Starts mosquitto again after it died, on the same port with the same config and logins (bridges
+        reconnect to the URL they have). Raises BrokerError when it does not come up."""
+        if self._dir is None or self.port is None:
+            raise BrokerError("broker never started")
+        if self.running():
+            return self
+        if self._proc is not None and self._proc.stderr:
+            self._proc.stderr.close()
+        conf = os.path.join(self._dir, "mosquitto.conf")
+        deadline = time.monotonic() + self.start_timeout
+        while True:   # the old socket may linger in TIME_WAIT for a moment
+            self._proc = subprocess.Popen([self.binary, "-c", conf], stdin=subprocess.DEVNULL,
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=_die_with_parent)
+            if self._wait_ready():
+                return self
+            text = self._failure_text()
+            if self._proc.poll() is None:
+                self._proc.kill()
+                self._proc.wait()
+            self._proc = None
+            if time.monotonic() > deadline:
+                raise BrokerError("mosquitto did not start again on %s:%s: %s" % (self.host, self.port, text))
+            time.sleep(0.2)
 
     def _wait_ready(self):
         deadline = time.monotonic() + self.start_timeout

@@ -25,10 +25,10 @@ from coaty_bridge.errors import (CoatyError, InvalidJsonError, InvalidPayloadErr
                                  NonFiniteNumberError, OutOfRangeError, PayloadTooLargeError,
                                  TooManyIndexesError, WrongTypeError)
 from coaty_bridge.topics import check_uuid, _UUID_RE
-from coaty_bridge.errors import InvalidNameError, ObstacleCellsError, ObstacleExtentError
+from coaty_bridge.errors import (CellsOutsideRectangleError, InvalidNameError, ObstacleCellsError, ObstacleExtentError,
+                                 RectangleCellsError)
 from sharing_msgs import obstacle_rules
-from sharing_handler_py.authority import PeerPolicy
-from sharing_handler_py.errors import InvalidMessageError
+from sharing_msgs.authority import AuthorityError, PeerPolicy, check_cells_inside, rectangle_capacity
 
 IDENTITY_OBJECT_TYPE = "coaty.Identity"
 IDENTITY_CORE_TYPE = "Identity"
@@ -59,10 +59,12 @@ class CodecLimits:
     """Bounds applied to everything that arrives."""
     max_payload_bytes: int = 1024 * 1024
     max_indexes: int = 1_000_000
-    # The handler's caps (sharing_handler_py.authority.PeerPolicy, the same rules): checked
+    # The handler's caps (sharing_msgs.authority.PeerPolicy, the same rules): checked
     # here before the index sets are expanded (issue 27, attack 4).
     max_obstacle_extent: float = 10.0   # m, longest side of the rectangle
-    max_obstacle_cells: int = 0         # 0 = the cells of a max_obstacle_extent square (+1 cell a side)
+    max_obstacle_cells: int = 0         # 0 = the cells of a square of the extent cap (+1 cell a side)
+    # m; > 0: a robot's obstacle is at most what one robot can see across (issue 43, PeerPolicy)
+    max_sensor_reach: float = 0.0
 
     def __post_init__(self):
         for name in ("max_payload_bytes", "max_indexes"):
@@ -71,7 +73,8 @@ class CodecLimits:
                 raise ValueError("%s must be a positive integer, got %r" % (name, value))
         # PeerPolicy validates both caps and raises ValueError naming a bad one
         object.__setattr__(self, "policy", PeerPolicy(max_extent=self.max_obstacle_extent, max_lifetime=1,
-                                                      max_obstacle_cells=self.max_obstacle_cells))
+                                                      max_obstacle_cells=self.max_obstacle_cells,
+                                                      max_sensor_reach=self.max_sensor_reach))
 
     def obstacle_cell_cap(self, resolution):
         """Cells one obstacle may hold on a grid of this resolution (the handler's rule)."""
@@ -218,20 +221,22 @@ def _num_list(obj, key, length):
     return [float(v) for v in value]
 
 
-def _indexes(obj, key, cells, max_count, cell_cap=None):
+def _indexes(obj, key, cells, max_count, cell_cap=None, rectangle_cap=None):
     value = _get(obj, key)
     limit = min(cells, max_count)
-    if cell_cap is not None and cell_cap < limit:
-        # the obstacle cap is the tighter bound: decode_indexes stops at it (never expands more)
+    for cap, error, why in ((rectangle_cap, RectangleCellsError, "more cells than its rectangle holds (%d)"),
+                            (cell_cap, ObstacleCellsError, "more cells than max_obstacle_cells %d allows for one obstacle")):
+        if cap is None or cap >= limit:
+            continue
+        # the tighter bound: decode_indexes stops at it (never expands more)
         try:
             if isinstance(value, str):
-                return compact.decode_indexes(value, cells, cell_cap)
-            if isinstance(value, list) and len(value) > cell_cap:
+                return compact.decode_indexes(value, cells, cap)
+            if isinstance(value, list) and len(value) > cap:
                 raise TooManyIndexesError("%s has %d indexes" % (key, len(value)))
         except TooManyIndexesError as err:
-            raise ObstacleCellsError("%s: more cells than max_obstacle_cells %d allows for one obstacle (%s)"
-                                     % (key, cell_cap, err)) from None
-        limit = cell_cap
+            raise error(("%s: " + why + " (%s)") % (key, cap, err)) from None
+        limit = cap
     if isinstance(value, str):
         return compact.decode_indexes(value, cells, limit)
     if not isinstance(value, list):
@@ -304,12 +309,18 @@ def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimit
     # declare 10^6 cells; the handler would drop the obstacle, so do not build it at all.
     try:
         limits.policy.check_extent(_Rectangle(*rectangle), "rectangle of obstacle %s" % uuid)
-    except InvalidMessageError as err:
+    except AuthorityError as err:
         raise ObstacleExtentError(str(err)) from None
     cell_cap = limits.obstacle_cell_cap(resolution)
-    marked = _indexes(obj, "markedIndexes", cells, limits.max_indexes, cell_cap)
-    cleared = _indexes(obj, "clearedIndexes", cells, limits.max_indexes, cell_cap)
-    return ObstacleUpdate(
+    # A one-cell rectangle declaring 40,000 cells (issue 43, item 1): refused before the cells are built.
+    rectangle_cap = None
+    if all(isinstance(v, (int, float)) and math.isfinite(v) for v in rectangle + tuple(origin)) \
+            and rectangle[0] <= rectangle[2] and rectangle[1] <= rectangle[3] \
+            and isinstance(resolution, (int, float)) and math.isfinite(resolution) and resolution > 0:
+        rectangle_cap = rectangle_capacity(_Rectangle(*rectangle), resolution, origin[0], origin[1])
+    marked = _indexes(obj, "markedIndexes", cells, limits.max_indexes, cell_cap, rectangle_cap)
+    cleared = _indexes(obj, "clearedIndexes", cells, limits.max_indexes, cell_cap, rectangle_cap)
+    update = ObstacleUpdate(
         uuid=uuid,
         source=_str(obj, "source"),
         version=_int(obj, "version", 1, MAX_SAFE_INTEGER),
@@ -325,6 +336,20 @@ def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimit
         marked=marked,
         cleared=cleared,
     )
+    check_inside(update)
+    return update
+
+
+def check_inside(update):
+    """Raises RectangleCellsError / CellsOutsideRectangleError unless every cell of ``update`` lies inside its
+    rectangle (sharing_msgs.authority.check_cells_inside, the handler's rule)."""
+    try:
+        check_cells_inside(_Rectangle(*update.rectangle), update.marked, update.cleared, update.resolution,
+                           update.origin_x, update.origin_y, update.size_x, "obstacle %s v%d from %s"
+                           % (update.uuid, update.version, update.source))
+    except AuthorityError as err:
+        raise (RectangleCellsError if err.reason == "more_cells_than_rectangle" else CellsOutsideRectangleError)(
+            str(err)) from None
 
 
 # -------------------------------------------------------------------- events

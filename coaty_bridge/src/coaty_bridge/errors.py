@@ -87,6 +87,29 @@ class ObstacleExtentError(OutOfRangeError):
     reason = "oversized_rectangle"
 
 
+class RectangleCellsError(TooManyIndexesError):
+    """An obstacle declares more cells than its rectangle holds (issue 43, item 1); found before the
+    index sets are expanded."""
+    reason = "more_cells_than_rectangle"
+
+
+class CellsOutsideRectangleError(OutOfRangeError):
+    """A cell of an obstacle lies outside its rectangle (issue 43, item 1)."""
+    reason = "cells_outside_rectangle"
+
+
+class ImplausibleEvidenceError(InvalidPayloadError):
+    """No cell of an obstacle message lies within its sender's advertised sensor reach of a pose it
+    advertised near the message's stamp (issue 43, plausible evidence)."""
+    reason = "implausible_evidence"
+
+
+class ReservedSourceError(InvalidPayloadError):
+    """An obstacle under a name no robot may use (master control's: its areas come from the VDA 5050
+    bridge of each robot, never over Coaty)."""
+    reason = "reserved_source"
+
+
 class ObstacleCellsError(TooManyIndexesError):
     """An obstacle declares more cells than max_obstacle_cells (the handler's cap); found
     before the index sets are expanded."""

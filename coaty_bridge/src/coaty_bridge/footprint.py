@@ -8,9 +8,11 @@ its own objectType (default ``org.fleetsharing.RobotFootprint``) on
     {"objectType": "org.fleetsharing.RobotFootprint", "coreType": "CoatyObject",
      "objectId": <uuid of this advert series>, "name": "robot_0",
      "robot": "robot_0", "stamp": 1700000000.25, "frameId": "map",
-     "footprint": [[x, y], [x, y], ...]}
+     "footprint": [[x, y], [x, y], ...], "reach": 4.0}
 
 ``footprint`` is the polygon in ``frameId`` at ``stamp`` (move_base's global_costmap/footprint).
+``reach`` (m, optional, issue 43) is how far the robot's sensors see from there: the evidence its
+obstacle messages are judged by (sharing_msgs.authority.evidence); an advert without it claims nothing.
 Receivers keep the latest advert per robot and forget a robot not heard for ``robot_timeout``;
 the sharing layers never share cells within a known robot's footprint plus a margin.
 
@@ -51,6 +53,8 @@ MAX_TEXT = 256
 MAX_VALID_FOR = 600.0
 #: A parked robot's advert is valid for this many of its advert intervals (one lost advert is no gap).
 PARKED_VALIDITY = 2.5
+#: Longest sensor reach an advert may state, m (a receiver caps it further: max_sensor_reach).
+MAX_REACH = 1000.0
 #: footprint_area_size bounds, m (0 is allowed too: no areas).
 MIN_AREA_SIZE = 1.0
 MAX_AREA_SIZE = 10000.0
@@ -80,8 +84,14 @@ class RobotFootprint:
     # s the receivers keep it without a newer advert; 0: their own robot_timeout. A parked robot
     # advertises rarely and says so (issue 29).
     valid_for: float = 0.0
+    # m the robot's sensors reach from its pose (issue 43: the evidence its obstacle messages are judged by)
+    reach: float = 0.0
 
     def __post_init__(self):
+        reach = _finite_number("reach", self.reach)
+        if not 0.0 <= reach <= MAX_REACH:
+            raise OutOfRangeError("reach %r outside [0, %g] m" % (reach, MAX_REACH))
+        object.__setattr__(self, "reach", reach)
         valid_for = _finite_number("validFor", self.valid_for)
         if not 0.0 <= valid_for <= MAX_VALID_FOR:
             raise OutOfRangeError("validFor %r outside [0, %g] s" % (valid_for, MAX_VALID_FOR))
@@ -134,6 +144,8 @@ def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJE
     }
     if footprint.valid_for > 0:
         obj["validFor"] = footprint.valid_for
+    if footprint.reach > 0:
+        obj["reach"] = footprint.reach
     return obj
 
 
@@ -158,7 +170,7 @@ def footprint_from_object(obj, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
     if not isinstance(obj["frameId"], str):
         raise WrongTypeError("frameId %s is not a string" % _short(obj["frameId"]))
     return RobotFootprint(robot=obj["robot"], stamp=obj["stamp"], frame_id=obj["frameId"],
-                          points=obj["footprint"], valid_for=obj.get("validFor", 0.0))
+                          points=obj["footprint"], valid_for=obj.get("validFor", 0.0), reach=obj.get("reach", 0.0))
 
 
 def decode_footprint_advertise(data, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):

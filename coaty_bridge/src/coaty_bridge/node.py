@@ -1,7 +1,8 @@
 """rospy node ``coaty_bridge``: wires the robot's topics to one Coaty agent.
 
     to_fleet (SharedObstacle)               -> Advertise to the fleet
-    fleet (Advertise / Resolve)             -> from_fleet (SharedObstacle)
+    fleet (Advertise, renewals)             -> from_fleet (SharedObstacle): observations
+    fleet (Resolve to our Discover)         -> fleet_state (SharedObstacle): copies restoring state
     shared_obstacle_list (SharedObstacleArray, latched) -> answers to obstacle Discovers
     move_base/global_costmap/footprint (PolygonStamped) -> Advertise of this robot's footprint, 2 Hz
     fleet (footprint Advertise)             -> fleet_robots (RobotFootprintArray, latched, 2 Hz)
@@ -18,9 +19,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point32, PolygonStamped
 from sharing_msgs.msg import RobotFootprint, RobotFootprintArray, SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
+from sharing_msgs.authority import MASTER_CONTROL
 from sharing_msgs.safe_publisher import SafePublisher
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_url
+from coaty_bridge.connection import masked_client_id
 from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
@@ -30,6 +33,10 @@ from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotT
 
 LOG = logging.getLogger(__name__)
 
+#: per-sender drop counters named in /diagnostics as they rise: floods (issue 27) and implausible evidence (issue 43)
+SENDER_DROPS = ("dropped_source_rate_limited.", "dropped_source_queue_full.", "dropped_implausible_cells.",
+                "dropped_implausible_evidence.")
+
 # private parameter -> BridgeConfig field default; the types are checked by BridgeConfig
 _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "identity_id", "tls_ca", "tls_cert",
            "tls_key", "username", "password", "max_payload_bytes", "max_indexes",
@@ -37,7 +44,9 @@ _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "i
            "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "discover_answers", "authenticate_sources", "footprint_area_size",
            "obstacle_area_size",
            "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
-           "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size")
+           "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size",
+           "sensor_reach", "max_sensor_reach", "require_evidence", "evidence_window", "max_robot_speed",
+           "localisation_tolerance")
 
 
 def msg_to_update(msg):
@@ -70,6 +79,17 @@ def update_to_msg(update):
     msg.size_y = int(update.size_y)
     msg.version = int(update.version)
     return msg
+
+
+class _OnNewSubscriber(rospy.SubscribeListener):
+    """Calls ``callback()`` whenever a subscriber connects to the publisher."""
+
+    def __init__(self, callback):
+        rospy.SubscribeListener.__init__(self)
+        self.callback = callback
+
+    def peer_subscribe(self, _topic, _publish_all, _publish_single):
+        self.callback()
 
 
 class RosoutHandler(logging.Handler):
@@ -187,6 +207,7 @@ def read_config():
             kwargs["password"] = read_password_file(password_file)
         except ValueError as err:
             raise ValueError("parameter %s" % err) from None
+        kwargs["password_file"] = password_file
     try:
         config = BridgeConfig(robot_name=robot_name, broker_url=choice.url, broker_url_source=choice.source,
                               **kwargs)
@@ -229,9 +250,17 @@ class BridgeNode:
         self.from_fleet = SafePublisher(
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
             topic="%s/from_fleet" % config.robot_name)
+        # Resolves answering our Discover restore state: the handler never takes them as a renewal (issue 43)
+        self.fleet_state = SafePublisher(
+            lambda: rospy.Publisher("fleet_state", SharedObstacle, queue_size=1000,
+                                    subscriber_listener=_OnNewSubscriber(self._on_restarted_handler)),
+            topic="%s/fleet_state" % config.robot_name)
+        self._started = False
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint,
                                         on_footprint_withdrawn=self._on_fleet_footprint_withdrawn)
+        # a robot that advertises its footprint keeps its first obstacles back until its footprint is here
+        self.client.expect_footprints(self.footprint_config.advertise)
         self.fleet_robots = rospy.Publisher("fleet_robots", RobotFootprintArray, queue_size=2, latch=True)
         rospy.Subscriber("to_fleet", SharedObstacle, self._on_to_fleet, queue_size=100)
         rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self._on_obstacle_list, queue_size=2)
@@ -254,7 +283,7 @@ class BridgeNode:
                       "MQTT client id %s, login %s%s",
                       self.config.robot_name, self.client.identity_id, self.config.broker_url,
                       self.config.broker_url_source, self.config.namespace, self.config.object_type,
-                      self.client.client_id, self.config.username or "anonymous",
+                      masked_client_id(self.client.client_id), self.config.username or "anonymous",
                       ", authenticated sources" if self.config.authenticate_sources else "")
         if self.config.insecure:
             rospy.logwarn("%s: coaty_bridge: INSECURE (insecure:=true)%s: %s", self.config.robot_name,
@@ -262,6 +291,26 @@ class BridgeNode:
                           "obstacles under any robot's name are taken from anyone on the broker, and a broker "
                           "that is not on this machine may be reached without TLS")
         self.client.start()
+        self._started = True
+
+    def _on_restarted_handler(self):
+        """A new subscriber of fleet_state after start: the handler started again (issue 43, item 8) and holds
+        nothing. The fleet is asked again, and this robot's own updates go to it at once."""
+        if not self._started:
+            return   # the first connect asks the fleet anyway
+        def restore():
+            rospy.sleep(0.5)   # the subscriber's connection completes after this callback
+            own = self.client.restore()
+            for update in own:
+                try:
+                    self.fleet_state.publish(update_to_msg(update), "%s: own obstacle %s v%d back to the handler" % (
+                        self.config.robot_name, update.uuid, update.version))
+                except Exception as err:  # noqa: BLE001 - one bad value must not stop the rest
+                    self.fleet_state.drop("conversion", "own obstacle %s" % update.uuid, err)
+            if own:
+                rospy.loginfo("%s: %d of this robot's own updates handed back to the handler", self.config.robot_name,
+                              len(own))
+        threading.Thread(target=restore, name="coaty_bridge restore", daemon=True).start()
 
     def shutdown(self):
         self._timer.shutdown()
@@ -280,7 +329,7 @@ class BridgeNode:
         except Exception as err:  # noqa: BLE001 - one bad value must not stop delivery
             self.from_fleet.drop("conversion", what, err)
             return
-        self.from_fleet.publish(msg, what)
+        (self.fleet_state if topic.event == "RSV" else self.from_fleet).publish(msg, what)
 
     def _on_own_footprint(self, msg):
         try:
@@ -293,6 +342,7 @@ class BridgeNode:
         now = rospy.get_time()
         self._own_footprint = (footprint, now)
         self.client.note_own_position(centroid(footprint.points))
+        self.client.note_own_footprint(footprint)   # the evidence before its obstacle messages
         # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
         # at most min_move (plus transport), not by a whole heartbeat period of driving.
         if self.footprint_config.advertise:
@@ -379,6 +429,10 @@ class BridgeNode:
     def _on_obstacle_list(self, msg):
         updates = []
         for item in msg.obstacles:
+            if item.source == MASTER_CONTROL:
+                # master control tells every robot its areas itself; answered by a robot they would go out under
+                # that robot's name (issue 43, item 2)
+                continue
             if not item.marked_indexes:
                 # An obstacle emptied by raytracing draws nothing on a late joiner; a fleet
                 # message without cells is refused by every receiver anyway.
@@ -403,8 +457,7 @@ class BridgeNode:
     def _new_source_drops(self, counters):
         """'robot_9@1a2b3c4d: 3785 dropped_source_rate_limited' for the senders whose excess was dropped
         since the last report (issue 27, item 3), the three largest; "" when none."""
-        per_sender = {k: n for k, n in counters.items() if k.startswith(("dropped_source_rate_limited.",
-                                                                      "dropped_source_queue_full."))}
+        per_sender = {k: n for k, n in counters.items() if k.startswith(SENDER_DROPS)}
         last = self._sender_drops_reported
         self._sender_drops_reported = per_sender
         new = sorted(((n - last.get(k, 0), k) for k, n in per_sender.items() if n > last.get(k, 0)), reverse=True)
@@ -425,31 +478,39 @@ class BridgeNode:
         counters["publishers_repaired"] = self.from_fleet.repaired
         counters["publishers_recreated"] = self.from_fleet.recreated
         flood = self._new_source_drops(counters)
+        login_level, login_problem = self.client.login_alerts.status()
+        # Every current problem is reported, the worst sets the level: a login alert must not hide
+        # the sender flooding right now, nor the other way round (issue 43).
+        problems = []
         if level == safe_publisher.ERROR:
-            status.level = DiagnosticStatus.ERROR
-            status.message = problem
+            problems.append((DiagnosticStatus.ERROR, problem))
         elif level == safe_publisher.WARN:
-            status.level = DiagnosticStatus.WARN
-            status.message = problem
-        elif flood:
-            # a flooding sender (issue 27, item 3): name it and the limit
-            status.level = DiagnosticStatus.WARN
-            status.message = "dropping a sender's excess: " + flood
-        elif self.client.connected:
+            problems.append((DiagnosticStatus.WARN, problem))
+        if self.client.tls_problem and not self.client.connected:
+            # an absent, unreadable or expired certificate or key (issue 43, item 9): which file, what, what to do
+            problems.append((DiagnosticStatus.ERROR, "not connected to %s: %s"
+                             % (self.config.broker_url, self.client.tls_problem)))
+        if login_level:
+            # another connection under this robot's login (issue 43, item 6): WARN once, ERROR when repeated
+            problems.append((DiagnosticStatus.ERROR if login_level >= 2 else DiagnosticStatus.WARN, login_problem))
+        if flood:
+            # a flooding sender (issue 27, item 3) or one claiming what it could not see (issue 43): name it
+            problems.append((DiagnosticStatus.WARN, "dropping a sender's excess or implausible cells: " + flood))
+        if self.client.connected:
             # connected is not enough (issue 27, attack 6): do heartbeats cross the bus?
             live, reason = self.client.liveness.status()
             if live == liveness.ERROR:
-                status.level = DiagnosticStatus.ERROR
-                status.message = "connected to %s but %s" % (self.config.broker_url, reason)
+                problems.append((DiagnosticStatus.ERROR, "connected to %s but %s" % (self.config.broker_url, reason)))
             elif live == liveness.WARN:
-                status.level = DiagnosticStatus.WARN
-                status.message = "connected to %s but %s" % (self.config.broker_url, reason)
-            else:
-                status.level = DiagnosticStatus.OK
-                status.message = "connected to %s" % self.config.broker_url
+                problems.append((DiagnosticStatus.WARN, "connected to %s but %s" % (self.config.broker_url, reason)))
+        elif not (self.client.tls_problem and not self.client.connected):
+            problems.append((DiagnosticStatus.WARN, "not connected to %s" % self.config.broker_url))
+        if problems:
+            status.level = max(level_ for level_, _ in problems)
+            status.message = "; ".join(message for _, message in problems)
         else:
-            status.level = DiagnosticStatus.WARN
-            status.message = "not connected to %s" % self.config.broker_url
+            status.level = DiagnosticStatus.OK
+            status.message = "connected to %s" % self.config.broker_url
         status.values = [KeyValue(key, str(value)) for key, value in sorted(counters.items())]
         array = DiagnosticArray()
         array.header.stamp = rospy.Time.now()

@@ -41,9 +41,11 @@ def make_ca(directory, name="fleet-ca", days=3650):
     return Credentials(cert, key)
 
 
-def make_cert(ca, directory, common_name, ip=None, dns=None, days=825):
+def make_cert(ca, directory, common_name, ip=None, dns=None, days=825, valid_from=None, valid_until=None):
     """A certificate signed by `ca` with CN `common_name` (a robot: its identity id; the
-    broker: its host name), with subjectAltName IP/DNS for a server. Files <CN>.key/.crt."""
+    broker: its host name), with subjectAltName IP/DNS for a server. Files <CN>.key/.crt.
+    ``valid_from``/``valid_until`` (openssl times, e.g. "20200101000000Z") instead of ``days``: a certificate
+    already expired, or not valid yet (the tests of the bridges' errors for them)."""
     directory = os.path.abspath(directory)
     ca = Credentials(os.path.abspath(ca.cert), os.path.abspath(ca.key))
     os.makedirs(directory, exist_ok=True)
@@ -58,7 +60,24 @@ def make_cert(ca, directory, common_name, ip=None, dns=None, days=825):
             out.write("subjectAltName=%s\nextendedKeyUsage=serverAuth\n" % ",".join(names))
         else:
             out.write("extendedKeyUsage=clientAuth\n")
-    _run(["x509", "-req", "-in", csr, "-CA", ca.cert, "-CAkey", ca.key, "-CAcreateserial", "-out", cert,
-          "-days", str(days), "-extfile", ext], directory)
+    if valid_from or valid_until:
+        # openssl x509 signs only from now on; openssl ca takes any validity, from a throwaway database
+        db = os.path.join(directory, "ca_db")
+        os.makedirs(db, exist_ok=True)
+        open(os.path.join(db, "index.txt"), "a").close()
+        if not os.path.exists(os.path.join(db, "serial")):
+            with open(os.path.join(db, "serial"), "w") as out:
+                out.write("01\n")
+        conf = os.path.join(db, "ca.cnf")
+        with open(conf, "w") as out:
+            out.write("[ca]\ndefault_ca = fleet\n[fleet]\ndatabase = %s/index.txt\nserial = %s/serial\n"
+                      "new_certs_dir = %s\ndefault_md = sha256\npolicy = any\nunique_subject = no\n"
+                      "[any]\ncommonName = supplied\n" % (db, db, db))
+        _run(["ca", "-batch", "-config", conf, "-cert", ca.cert, "-keyfile", ca.key, "-in", csr, "-out", cert,
+              "-startdate", valid_from or "20200101000000Z", "-enddate", valid_until or "20991231000000Z",
+              "-extfile", ext], directory)
+    else:
+        _run(["x509", "-req", "-in", csr, "-CA", ca.cert, "-CAkey", ca.key, "-CAcreateserial", "-out", cert,
+              "-days", str(days), "-extfile", ext], directory)
     os.chmod(key, 0o600)
     return Credentials(cert, key)

@@ -1,17 +1,23 @@
-"""The fleet's secure default (issue 27, item 9): one broker login per robot, generated on first use.
+"""The fleet's secure default (issue 27, item 9; issue 43): one broker login per robot, generated on first use.
 
     creds = FleetCredentials.ensure(credentials_dir(), ["robot_0", "robot_1"])
     creds.password_file("robot_0")      # the bridge's ~password_file (its login: its identity id)
-    lines = creds.broker_config(tmpdir)  # mosquitto lines: password file, ACL, client id = login
+    lines = creds.broker_config(tmpdir)  # mosquitto lines: password file, ACL
+    creds.add("robot_3"); creds.rotate("robot_0")   # while the fleet runs (fleet_credentials)
 
 Layout of the credentials folder (default ``$ROS_HOME/fleet_security``, i.e. ``~/.ros/fleet_security``):
 
     robots/<robot>.password   one random secret per robot (mode 0600), made when first needed
     monitor.password          the secret of the read-only login ``fleet_monitor`` ($SYS/# only)
+    broker.password           the secret of run_broker's own login (``fleet_broker``: it tells a robot about
+                              other connections under its login, logins.py)
+    master_control.password   master control's VDA 5050 login (orders, instant actions, zone sets)
 
 Only the plain secrets persist there; the hashed mosquitto password file and the ACL are written
-into the broker's own private directory at every start, so adding a robot is just naming it.
-Secrets are linked into place whole, so two launches sharing the folder agree on them.
+into the broker's own private directory at every start and whenever a secret in the folder changes
+(run_broker watches it and has mosquitto reload them, no restart), so adding a robot is just naming
+it. Every robot with a secret in the folder has a login. Secrets are linked into place whole, so two
+launches sharing the folder agree on them.
 
 Why under $ROS_HOME and not in the repository: it is per user (root and a normal user each get
 their own, so neither meets the other's 0600 files), it works from a read-only install space,
@@ -29,6 +35,12 @@ from coaty_bridge.topics import check_name
 
 #: the read-only login for broker statistics ($SYS/#), e.g. the fleet bench's byte counters
 MONITOR = "fleet_monitor"
+#: run_broker's own login (a robot name no robot may take): it publishes the login alerts (logins.py)
+BROKER_LOGIN = "fleet_broker"
+#: master control's VDA 5050 login (its areas' source name too; no robot may take it)
+MASTER_CONTROL_LOGIN = "master_control"
+#: robot names that are roles, not robots
+RESERVED_NAMES = (BROKER_LOGIN, MASTER_CONTROL_LOGIN, MONITOR)
 MOSQUITTO_PASSWD = "mosquitto_passwd"
 ACL_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                         "config", "mosquitto_acl.conf")
@@ -71,6 +83,8 @@ def robot_names(robots):
     names = []
     for name in robots:
         check_name(name, "robot name")
+        if name in RESERVED_NAMES:
+            raise ValueError("robot name %r is reserved (%s are roles, not robots)" % (name, ", ".join(RESERVED_NAMES)))
         if name not in names:
             names.append(name)
     return names
@@ -136,8 +150,51 @@ class FleetCredentials:
         creds = cls(directory, robots, namespace)
         for robot in robots:
             _secret_file(creds.password_file(robot))
-        _secret_file(creds.monitor_password_file)
+        for path in (creds.monitor_password_file, creds.broker_password_file, creds.master_control_password_file):
+            _secret_file(path)
         return creds
+
+    def robots_in_folder(self):
+        """Every robot with a secret in the folder (the configured ones, and those added since), sorted."""
+        folder = os.path.join(self.directory, "robots")
+        names = set(self.robots)
+        for entry in os.listdir(folder):
+            name = entry[:-len(".password")]
+            if entry.endswith(".password") and name not in RESERVED_NAMES:
+                try:
+                    check_name(name, "robot name")
+                except ValueError:
+                    continue
+                names.add(name)
+        return sorted(names)
+
+    def add(self, robot):
+        """Gives ``robot`` a login (a new secret) unless it has one; returns True when it was made."""
+        robot_names([robot])
+        path = self.password_file(robot)
+        if os.path.exists(path):
+            return False
+        _secret_file(path)
+        return True
+
+    def rotate(self, robot):
+        """Replaces ``robot``'s secret (its bridge reads the file again on its next connection)."""
+        robot_names([robot])
+        path = self.password_file(robot)
+        if not os.path.exists(path):
+            raise ValueError("robot %s has no login in %s (add it first)" % (robot, self.directory))
+        fd, temporary = tempfile.mkstemp(dir=os.path.dirname(path), prefix=".rotate_")   # mode 0600
+        with os.fdopen(fd, "w") as out:
+            out.write(secrets.token_urlsafe(24) + "\n")
+        os.replace(temporary, path)
+
+    def fingerprint(self):
+        """What the broker's logins are made of now: (robot, secret) pairs and the roles' secrets; run_broker
+        rewrites the password file when it changes."""
+        robots = self.robots_in_folder()
+        return tuple((robot, read_password_file(self.password_file(robot))) for robot in robots) + tuple(
+            read_password_file(p) for p in (self.monitor_password_file, self.broker_password_file,
+                                            self.master_control_password_file))
 
     def password_file(self, robot):
         return os.path.join(self.directory, "robots", robot + ".password")
@@ -146,35 +203,63 @@ class FleetCredentials:
     def monitor_password_file(self):
         return os.path.join(self.directory, "monitor.password")
 
+    @property
+    def broker_password_file(self):
+        return os.path.join(self.directory, "broker.password")
+
+    @property
+    def master_control_password_file(self):
+        return os.path.join(self.directory, "master_control.password")
+
+    def broker_login(self):
+        """(username, password) of run_broker's own login: the identity of the reserved name fleet_broker."""
+        return identity_for(self.namespace, BROKER_LOGIN), read_password_file(self.broker_password_file)
+
     def login(self, robot):
         """(username, password) of a robot: its identity id and its secret."""
         return identity_for(self.namespace, robot), read_password_file(self.password_file(robot))
 
     def broker_config(self, directory):
         """Writes the hashed password file and the ACL into ``directory`` (the broker's private
-        folder, mode 0600) and returns the mosquitto config lines that use them."""
+        folder, mode 0600) and returns the mosquitto config lines that use them. The client id is not
+        the login (issue 43, item 6): a second connection under a robot's login would take the robot
+        off the broker; the bridge's client id carries a secret nonce instead."""
+        self.write_logins(directory)
+        return ["password_file " + os.path.join(directory, "passwords"),
+                "acl_file " + os.path.join(directory, "acl.conf")]
+
+    def write_logins(self, directory):
+        """(Re)writes the hashed password file and the ACL in ``directory`` for every robot with a secret in
+        the folder; mosquitto reads them again on SIGHUP. Returns the robots that have a login."""
         if not shutil.which(MOSQUITTO_PASSWD):
             raise RuntimeError("%s not found (apt-get install mosquitto)" % MOSQUITTO_PASSWD)
+        robots = self.robots_in_folder()
         passwords = os.path.join(directory, "passwords")
-        fd = os.open(passwords, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        fd, staged = tempfile.mkstemp(dir=directory, prefix=".passwords_")   # mode 0600
         with os.fdopen(fd, "w") as out:
-            for robot in self.robots:
-                out.write("%s:%s\n" % self.login(robot))
+            for robot in robots:
+                username, secret = self.login(robot)
+                out.write("%s:%s\n" % (username, secret))
+                # the robot's VDA 5050 login: its name (its serial number there), the same secret
+                out.write("%s:%s\n" % (robot, secret))
             out.write("%s:%s\n" % (MONITOR, read_password_file(self.monitor_password_file)))
+            out.write("%s:%s\n" % self.broker_login())
+            out.write("%s:%s\n" % (MASTER_CONTROL_LOGIN, read_password_file(self.master_control_password_file)))
         # -U hashes the plain "user:password" lines in place (no secret on a command line)
-        proc = subprocess.run([MOSQUITTO_PASSWD, "-U", passwords], stdout=subprocess.PIPE,
+        proc = subprocess.run([MOSQUITTO_PASSWD, "-U", staged], stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, timeout=60)
         if proc.returncode != 0:
+            os.unlink(staged)
             raise RuntimeError("mosquitto_passwd -U failed: %s" % proc.stdout.strip()[-300:])
+        os.replace(staged, passwords)   # mosquitto never reads a half-written file
         acl = os.path.join(directory, "acl.conf")
         with open(acl_file()) as shipped:
             rules = shipped.read()
-        fd = os.open(acl, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        fd, staged = tempfile.mkstemp(dir=directory, prefix=".acl_")   # mode 0600
         with os.fdopen(fd, "w") as out:
             # user rules first: mosquitto applies pattern rules to every login, user rules to one
             out.write("# generated by coaty_bridge.security from config/mosquitto_acl.conf\n"
                       "user %s\ntopic read $SYS/#\n\n%s" % (MONITOR, rules))
-        return ["password_file " + passwords, "acl_file " + acl,
-                # the client id is the login: a peer that knows a robot's client id cannot connect
-                # under it without the robot's password (issue 27, attack 5)
-                "use_username_as_clientid true"]
+        os.replace(staged, acl)
+        self.robots = robots
+        return robots

@@ -1,5 +1,6 @@
 """The package's exception tree: SharingError -> InvalidMessageError, InvalidParameterError,
 InvalidRequestError. All are ValueErrors, so callers that only know ValueError still catch them."""
+from sharing_msgs.authority import AuthorityError
 
 
 class SharingError(ValueError):
@@ -17,6 +18,11 @@ class InvalidMessageError(SharingError):
         super().__init__("%s: %s" % (reason, detail))
         self.reason = reason
         self.detail = detail
+
+
+#: What a refused message raises: one of this package's checks, or one of the rules of authority
+#: (sharing_msgs.authority, shared with the bridges). Both carry ``reason`` and ``detail``.
+REFUSED = (InvalidMessageError, AuthorityError)
 
 
 class InvalidParameterError(SharingError):

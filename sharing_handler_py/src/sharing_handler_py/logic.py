@@ -18,15 +18,25 @@ are one obstacle. The one with the smaller uuid absorbs the other: per cell the 
 wins, as if every update of both had been sent for the surviving uuid, and later messages for
 the absorbed uuid are applied to the survivor. Rectangles only grow, so two obstacles once
 within merge_distance stay so, and every robot ends with the same merged obstacles whatever
-the order the messages came in. A proposal within merge_distance of a live obstacle becomes an
-update of it. Merges stop at the caps (issue 27): two obstacles whose union would exceed
-max_obstacle_extent or max_obstacle_cells stay apart; only there can robots that saw the
-obstacles in different orders end with different groups.
+the order the messages came in. A proposal within merge_distance of a live obstacle of this robot's
+becomes an update of it. Merges stop at the caps (issue 27): two obstacles whose union would exceed
+the extent or cell caps stay apart; only there can robots that saw the obstacles in different orders
+end with different groups.
 
-Leases (issue 12): a message that marks cells is an observation of the obstacle; the robot
-that made it gives it a full obstacle_duration again. A held obstacle expires at the latest
-arrival + deadline of any observation of it (the greatest lease wins, whatever the order).
-Messages that only clear cells carry the lifetime left, so they never extend it.
+Provenance (issue 43): only obstacles first shared by the same source merge, so a merged obstacle never
+shows a source that did not send its cells: another robot's obstacle, or master control's area, is
+never absorbed, and a proposal near another robot's obstacle is an obstacle of its own. With
+``max_sensor_reach`` set, a robot's obstacle (merged or not) is at most what one robot can see across
+(sharing_msgs.authority.single_robot_extent), so it cannot grow by absorbing beyond that either.
+
+Leases (issue 12, issue 43): a live message that marks cells is an observation of the obstacle; the
+robot that made it gives it a full obstacle_duration again. A held obstacle expires at the latest
+arrival + deadline of any observation of it (the greatest lease wins, whatever the order). A message
+that marks nothing (a clear) never changes the lease: it removes the cells it saw free and leaves the
+rest as long-lived as before. Copies that restore state (``on_state``: Discover answers, a restarted
+handler's own copies) are no observation: they may add an obstacle, never renew one. Which marked
+cells count is the bridge's to check (plausible evidence, sharing_msgs.authority.evidence): a peer's
+message reaches this handler with only the cells its sensors could have seen.
 
 Evidence ends an obstacle (issue 26): when an update (this robot's or a peer's) leaves an
 obstacle with no present cell, every cell of it was seen free, and the obstacle leaves the list,
@@ -37,26 +47,28 @@ depend on the order: a later mark (a newer stamp: the block is back) shows it ag
 and an older one stays cleared. The lease (obstacle_duration after the last observation) only
 bounds what nobody checks.
 
-Bounded authority (issue 27, authority.py): no peer can make an obstacle larger, longer-lived
+Tombstones (issue 27, issue 43): leases.py.
+
+Bounded authority (issue 27, sharing_msgs.authority): no peer can make an obstacle larger, longer-lived
 or newer than this handler's own caps. A deadline is cut to obstacle_duration on arrival (so a
-renewal reaches at most arrival + obstacle_duration), a message that does not mark cells can
-only bring the expiry closer (the earlier expiry is kept), a message beyond the extent, cell or
-version caps is dropped, and two obstacles whose union would exceed the caps are not merged.
+renewal reaches at most arrival + obstacle_duration), a message beyond the extent, cell or version
+caps, or with a cell outside its rectangle, is dropped, and two obstacles whose union would exceed
+the caps are not merged.
 """
-import heapq
 import logging
 import math
 import uuid as uuidlib
-from dataclasses import dataclass
-from typing import Tuple
 
-from sharing_handler_py.authority import PeerPolicy
-from sharing_handler_py.errors import InvalidMessageError, InvalidRequestError
+from sharing_handler_py.entry import Entry, HeldObstacle, remaining_deadline  # noqa: F401 (re-exported)
+from sharing_handler_py.errors import REFUSED, InvalidMessageError
+from sharing_handler_py.leases import LeasesMixin
+from sharing_handler_py.manual import ManualMixin
+from sharing_handler_py.merging import MergingMixin
 from sharing_handler_py.nearby import RectangleIndex
-from sharing_handler_py.quotas import DropReport, SourceQuotas
-from sharing_handler_py.validation import (Geometry, Obstacle, Rectangle, check_fleet_message,
-                                           check_indexes, check_message_values, check_uuid)
+from sharing_handler_py.validation import Geometry, check_fleet_message, check_message_values, check_uuid, \
+    check_indexes
 from sharing_msgs import obstacle_rules
+from sharing_msgs.authority import MASTER_CONTROL, DropReport, PeerPolicy, SourceQuotas, check_cells_inside
 
 _log = logging.getLogger(__name__)
 
@@ -79,15 +91,19 @@ DROP_REASONS = (
     "bad_stamp",            # a header stamp outside the ROS time range (or not finite)
     "rectangle_outside_grid",  # a rectangle reaching beyond the grid it names
     "empty_update",         # a fleet message without any marked or cleared cell
-    # issue 27, bounded authority (authority.py)
+    # issue 27, bounded authority (sharing_msgs.authority.policy)
     "oversized_rectangle",  # a rectangle (own updates: the grown union) beyond max_obstacle_extent
     "too_many_obstacle_cells",  # a message with more cells than one obstacle may hold
     "implausible_version",  # more than max_version_step beyond the highest version seen
     "stale_stamp",          # stamped longer ago than obstacle_duration + max_clock_skew
     "future_stamp",         # stamped more than max_clock_skew ahead of our clock
-    # issue 27, per-source quotas (quotas.py): counted per source too, logged once per 10 s
+    # issue 43: a message's cells lie inside its rectangle (sharing_msgs.authority.check_cells_inside)
+    "cells_outside_rectangle",    # a cell whose centre lies outside the message's rectangle
+    "more_cells_than_rectangle",  # more cells than the rectangle holds
+    # issue 27, per-source quotas (sharing_msgs.authority.quotas): counted per source too, logged once per 10 s
     "source_quota",         # a new obstacle from a source already holding max_obstacles_per_source here
     "source_rate",          # beyond the source's token bucket (source_update_rate, source_update_burst)
+    "source_queue_full",    # the node's queue for that source was full (issue 43: fair delivery, node.py)
 )
 
 #: Counters besides the drops.
@@ -95,185 +111,18 @@ EVENT_COUNTERS = ("proposals", "authorised", "manual", "updates_in", "updates_ou
                   "restamped", "expired", "deferred", "merged_proposals", "merged_obstacles", "renewals",
                   "cleared_by_evidence",  # deleted at once: an update left no present cell (issue 26)
                   "capped_deadlines",  # a peer's deadline cut to obstacle_duration
-                  "merges_refused")    # two obstacles left apart: their union exceeds the caps
-
-
-@dataclass(frozen=True)
-class HeldObstacle:
-    """An obstacle as a handler holds it (one entry of the debug list)."""
-
-    uuid: str
-    source: str            # the robot that first shared it
-    version: int           # the greatest version seen
-    deadline: int          # seconds, as in the message that defines the metadata (first share)
-    rectangle: Rectangle   # union of every rectangle seen for it (and for obstacles it absorbed)
-    geometry: Geometry
-    frame_id: str
-    cells: Tuple[int, ...]  # present cells, sorted
-    arrival: float         # local arrival time (clock seconds)
-    remaining: float       # seconds left at the time of the listing (expiry - now)
-
-    def to_obstacle(self):
-        """Full-state message: cells marked, nothing cleared, deadline = remaining seconds
-        rounded down (at least 1), so a copy made from it never outlives this one by more
-        than a second."""
-        return Obstacle(uuid=self.uuid, marked=self.cells, cleared=(),
-                        deadline=remaining_deadline(self.remaining), rectangle=self.rectangle,
-                        source=self.source, geometry=self.geometry, version=self.version,
-                        frame_id=self.frame_id)
-
-
-def _meets(a, b):
-    """Whether two rectangles overlap or touch."""
-    return a.min_x <= b.max_x and b.min_x <= a.max_x and a.min_y <= b.max_y and b.min_y <= a.max_y
-
-
-def remaining_deadline(remaining):
-    """Seconds left -> the deadline a message carries: whole seconds rounded down (a copy must
-    not outlive the original), at least 1 (0 would be refused as expiring on arrival)."""
-    if not math.isfinite(remaining):
-        return 1
-    return int(min(obstacle_rules.MAX_UINT32, max(1, math.floor(remaining))))
-
-
-def _meta_key(obstacle):
-    """Orders the messages of one uuid to pick the one that defines the metadata: the smallest
-    stamp (version, source), then the smallest metadata for exact stamp ties."""
-    return (obstacle.version, obstacle.source, tuple(obstacle.rectangle.as_list()),
-            obstacle.deadline, obstacle.frame_id)
-
-
-class _Entry:
-    """Mutable state of one held obstacle."""
-
-    __slots__ = ("uuid", "source", "owner", "rectangle", "deadline", "geometry", "frame_id", "arrival",
-                 "_expires", "_heap", "first_key", "max_version", "stamps", "present", "sorted_cells")
-
-    def __init__(self, obstacle, arrival, heap=None):
-        self.uuid = obstacle.uuid
-        self.source = obstacle.source
-        self.owner = obstacle.source   # the source whose message made it here: its quota is charged
-        self.rectangle = obstacle.rectangle
-        self.deadline = obstacle.deadline
-        self.geometry = obstacle.geometry
-        self.frame_id = obstacle.frame_id
-        self.arrival = arrival
-        # Local expiry, a lease. Deadlines on the wire are remaining lifetimes aged to the moment
-        # of sending: a renewal carries a full obstacle_duration, anything else what is left,
-        # rounded down. The greatest arrival + deadline wins (see note_deadline).
-        # Every value it takes goes into the handler's deadline heap, so expiry need not look at
-        # every obstacle (items of values since replaced are skipped there).
-        self._heap = [] if heap is None else heap
-        self._expires = None
-        self.expires_at = arrival + obstacle.deadline
-        self.first_key = _meta_key(obstacle)
-        self.max_version = obstacle.version
-        self.stamps = {}          # cell -> (version, source) of the update that last set it
-        self.present = set()      # cells currently marked
-        self.sorted_cells = ()    # cache of sorted(present); None when stale
-
-    @property
-    def expires_at(self):
-        return self._expires
-
-    @expires_at.setter
-    def expires_at(self, value):
-        if value != self._expires:
-            self._expires = value
-            heapq.heappush(self._heap, (value, self.uuid))
-
-    def apply(self, obstacle):
-        """Applies one update by the stamp rule; returns True when anything visible changed."""
-        stamp = obstacle.stamp_key
-        stamps, present = self.stamps, self.present
-        get = stamps.get
-        before = len(present)
-        for cell in obstacle.marked:
-            old = get(cell)
-            if old is None or stamp > old:
-                stamps[cell] = stamp
-                present.add(cell)
-        changed = len(present) != before
-        for cell in obstacle.cleared:
-            old = get(cell)
-            if old is None or stamp >= old:
-                stamps[cell] = stamp
-                if cell in present:
-                    present.discard(cell)
-                    changed = True
-        if obstacle.version > self.max_version:
-            self.max_version = obstacle.version
-            changed = True
-        changed |= self._grow(obstacle.rectangle)
-        changed |= self._take_metadata(_meta_key(obstacle), obstacle.source, obstacle.deadline,
-                                       obstacle.frame_id)
-        if changed:
-            self.sorted_cells = None
-        return changed
-
-    def absorb(self, other):
-        """Joins another obstacle into this one (merging): per cell the greater (stamp, absent)
-        wins, which is what applying every update of both to this uuid gives; the greatest
-        version and lease, the union of the rectangles, the metadata of the earlier first share."""
-        stamps, present = self.stamps, self.present
-        for cell, stamp in other.stamps.items():
-            old = stamps.get(cell)
-            theirs = (stamp, cell not in other.present)
-            if old is None or theirs > (old, cell not in present):
-                stamps[cell] = stamp
-                if theirs[1]:
-                    present.discard(cell)
-                else:
-                    present.add(cell)
-        self.max_version = max(self.max_version, other.max_version)
-        self.expires_at = max(self.expires_at, other.expires_at)
-        self.arrival = min(self.arrival, other.arrival)
-        self._grow(other.rectangle)
-        self._take_metadata(other.first_key, other.source, other.deadline, other.frame_id)
-        self.sorted_cells = None
-
-    def _grow(self, rectangle):
-        if self.rectangle.contains(rectangle):
-            return False
-        self.rectangle = self.rectangle.union(rectangle)
-        return True
-
-    def _take_metadata(self, key, source, deadline, frame_id):
-        # The earliest share defines the metadata, so all robots agree on it; two messages
-        # with the same stamp (only a faulty peer sends them) are ordered by their metadata.
-        if key[:2] <= self.first_key[:2] and key < self.first_key:
-            self.first_key = key
-            self.source = source
-            self.deadline = deadline
-            self.frame_id = frame_id
-            return True
-        return False
-
-    def note_deadline(self, now, deadline):
-        """An observation of this obstacle (a message marking cells) arrived at `now` saying
-        `deadline` s remain (already capped by the policy): the greater lease wins."""
-        self.expires_at = max(self.expires_at, now + deadline)
-
-    def note_lease(self, now, deadline, observed):
-        """A fleet message arrived at `now` with `deadline` s left (capped by the policy). Only an
-        observation renews; anything else keeps the earlier expiry, so a peer's clear or stale
-        copy can never push the lease back."""
-        if observed:
-            self.note_deadline(now, deadline)
-        else:
-            self.expires_at = min(self.expires_at, now + deadline)
-
-    def cells(self):
-        if self.sorted_cells is None:
-            self.sorted_cells = tuple(sorted(self.present))
-        return self.sorted_cells
-
+                  "merges_refused",    # two obstacles left apart: their union exceeds the caps
+                  "state_copies",      # copies restoring state (on_state): applied, never a renewal
+                  "revived",           # a tombstoned obstacle observed again after its tombstone
+                  "reshared",          # this robot's layer marked cells of an expired obstacle: a new share
+                  "clears_kept_lease",  # a message marking nothing left the lease as it was (issue 43)
+                  "master_control_updates_not_shared")  # the layer's view of master control's area stays here
 
 def _noop(*_args):
     pass
 
 
-class SharingHandler:
+class SharingHandler(LeasesMixin, MergingMixin, ManualMixin):
     """Decides which proposals become fleet obstacles, which updates go out, what expires.
 
     Not thread-safe: call it from one thread (the node holds a lock around every call).
@@ -294,16 +143,18 @@ class SharingHandler:
         merge_distance: metres; obstacles (and proposals) whose rectangles lie this close are
             one obstacle (issue 12, merging). A robot needs at least twice its inscribed radius
             to pass between two obstacles, so a smaller gap is no passage anyway.
-        max_obstacle_extent, max_obstacle_cells, max_version_step, max_clock_skew: the caps of
-            every message and merge (authority.PeerPolicy); max_clock_skew None = stamps are
-            not compared with the clock.
+        max_obstacle_extent, max_obstacle_cells, max_version_step, max_clock_skew, max_sensor_reach: the
+            caps of every message and merge (sharing_msgs.authority.PeerPolicy); max_clock_skew None =
+            stamps are not compared with the clock; max_sensor_reach 0 = robots' obstacles are bounded
+            by max_obstacle_extent alone.
     """
 
     def __init__(self, robot_name, clock, obstacle_duration, on_to_layer, on_to_fleet, on_expired,
                  geometry=None, on_change=None, max_cells_per_message=100000, uuid_factory=None,
                  max_deferred=10000, max_obstacle_extent=10.0, merge_distance=0.5,
                  max_obstacle_cells=0, max_version_step=1000000, max_clock_skew=None,
-                 max_obstacles_per_source=1000, source_update_rate=100.0, source_update_burst=2000):
+                 max_obstacles_per_source=1000, source_update_rate=100.0, source_update_burst=2000,
+                 max_sensor_reach=0.0):
         if not robot_name or not isinstance(robot_name, str):
             raise ValueError("robot_name %r must be a non-empty string" % (robot_name,))
         if not (isinstance(obstacle_duration, (int, float)) and math.isfinite(obstacle_duration)
@@ -329,11 +180,12 @@ class SharingHandler:
         self._merge_distance = float(merge_distance)
         self._policy = PeerPolicy(max_extent=max_obstacle_extent, max_lifetime=self._deadline,
                                   max_obstacle_cells=max_obstacle_cells, max_version_step=max_version_step,
-                                  max_clock_skew=max_clock_skew)
+                                  max_clock_skew=max_clock_skew, max_sensor_reach=max_sensor_reach)
         self._entries = {}      # uuid -> _Entry
         self._nearby = RectangleIndex()  # uuid -> rectangle of every entry, for merging
         self._aliases = {}      # uuid of an absorbed obstacle -> uuid that absorbed it
         self._tombstones = {}   # uuid -> time until which messages for it are dropped
+        self._tombstoned_at = {}  # uuid -> clock time it was tombstoned (a live mark stamped later revives it)
         self._deadlines = []    # heap of (expires_at, uuid), one item per value an entry's expiry took
         self._tomb_heap = []    # heap of (until, uuid) of the tombstones
         self._deferred = []     # fleet messages waiting for a grid
@@ -378,9 +230,6 @@ class SharingHandler:
         entry = self._entries.get(uuid)
         return None if entry is None else self._held(entry, self._clock())
 
-    def is_tombstoned(self, uuid):
-        return uuid in self._tombstones
-
     def source_counters(self):
         """Quota drops per source, {"dropped_source_quota.robot_9": n, ...}, for /diagnostics."""
         return self._quota_log.counters()
@@ -400,13 +249,14 @@ class SharingHandler:
                          self.robot_name, self._geometry, geometry)
         self._geometry = geometry
         deferred, self._deferred = self._deferred, []
-        for obstacle in deferred:
-            self.on_external(obstacle)
+        for obstacle, live in deferred:
+            self.on_external(obstacle, live)
 
     def on_proposal(self, obstacle):
         """A new obstacle proposed by the layer. Returns the authorised Obstacle (version 1), the
         update it became when it lies within merge_distance of a live obstacle, or None when it
         was invalid."""
+        self.expire()                   # as on_external: an ended obstacle is not merged into
         self._counters["proposals"] += 1
         try:
             if obstacle.uuid:
@@ -420,9 +270,10 @@ class SharingHandler:
                 self.set_geometry(obstacle.geometry)
             self._check_grid(obstacle)
             # the layer's topic is open to any ROS node: the same caps as for a peer
-            self._policy.check_extent(obstacle.rectangle, "proposal rectangle")
-            self._policy.check_cells(len(obstacle.marked), self._geometry, "proposal")
-        except InvalidMessageError as err:
+            self._policy.check_extent(obstacle.rectangle, "proposal rectangle", self.robot_name)
+            self._policy.check_cells(len(obstacle.marked), self._geometry, "proposal", self.robot_name)
+            self._check_inside(obstacle, "proposal")
+        except REFUSED as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
         near = self._near(obstacle.rectangle, len(obstacle.marked))
@@ -439,6 +290,8 @@ class SharingHandler:
                 # the layer still knows an obstacle that was merged into another one
                 obstacle = obstacle.replace(uuid=self.resolve(obstacle.uuid))
             if obstacle.uuid in self._tombstones:
+                if obstacle.marked and self._geometry is not None:
+                    return self._reshare(obstacle)
                 raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
             entry = self._entries.get(obstacle.uuid)
             if entry is None:
@@ -446,18 +299,32 @@ class SharingHandler:
                                           "handler does not hold" % obstacle.uuid)
             if self._geometry is None:
                 raise InvalidMessageError("no_geometry", "no grid known yet")
+            if entry.source == MASTER_CONTROL:
+                # master control tells every robot its areas itself; this robot's view of one would go out under
+                # this robot's name (issue 43, item 2)
+                self._counters["master_control_updates_not_shared"] += 1
+                _log.debug("%s: layer update of master control's area %s not shared", self.robot_name, obstacle.uuid)
+                return None
             check_message_values(obstacle)
             self._check_grid(obstacle)
             if entry.expires_at - self._clock() < 1.0:
+                if obstacle.marked:
+                    # its lease ends now, but the layer sees it occupied: it ends here as the expiry tick would
+                    # end it, and what is seen goes out as a new obstacle (issue 43, item 3: the robot that sees
+                    # it again shares it again, whether or not the tick came first)
+                    self._expire_entry(obstacle.uuid)
+                    return self._reshare(obstacle)
                 # deadlines travel in whole seconds: sent now it would outlive the obstacle here
                 raise InvalidMessageError("expired", "obstacle %s has less than 1 s left" % obstacle.uuid)
             if obstacle.version <= entry.max_version and entry.max_version >= obstacle_rules.MAX_VERSION:
                 raise InvalidMessageError("bad_version", "obstacle %s is at the last version %d"
                                           % (obstacle.uuid, entry.max_version))
             # what goes out must pass every peer's caps; the own obstacle grows by union
-            self._policy.check_extent(entry.rectangle.union(obstacle.rectangle), "grown rectangle")
-            self._policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "update")
-        except InvalidMessageError as err:
+            self._policy.check_extent(entry.rectangle.union(obstacle.rectangle), "grown rectangle", entry.source)
+            self._policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "update",
+                                     entry.source)
+            self._check_inside(obstacle, "update")
+        except REFUSED as err:
             self.reject(obstacle.source or self.robot_name, obstacle.uuid, err)
             return None
         changes = {}
@@ -493,7 +360,7 @@ class SharingHandler:
         try:
             # What goes out must pass the fleet check on every receiver (the same rules).
             check_fleet_message(obstacle)
-        except InvalidMessageError as err:
+        except REFUSED as err:
             self.reject(self.robot_name, obstacle.uuid, err)
             return None
         self._to_fleet(obstacle)
@@ -507,17 +374,29 @@ class SharingHandler:
             self._merge_around(obstacle.uuid)
         return obstacle
 
-    def on_external(self, obstacle):
+    def on_state(self, obstacle):
+        """A copy that restores state (a Discover answer through the bridge, or what the bridge kept
+        for a restarted handler): applied like a fleet message, but no observation, so it may add an
+        obstacle and never renews one; it cannot lift a tombstone. Returns as on_external."""
+        self._counters["state_copies"] += 1
+        return self.on_external(obstacle, live=False)
+
+    def on_external(self, obstacle, live=True):
         """A message from another robot (via the bridge): added or applied, passed to the layer,
-        never sent back out. Returns True when applied now; False when dropped or deferred
+        never sent back out. ``live``: an observation as it was made (an Advertise, a renewal); a
+        state copy is not (on_state). Returns True when applied now; False when dropped or deferred
         (waiting for a grid)."""
+        # an obstacle whose lease ran out is gone before anything is applied or merged, not at the next tick: a
+        # peer's new share must not merge into it (its clears, stamped in its own versions, would hide the new
+        # marks, on this robot only)
+        self.expire()
         try:
-            self._check_external(obstacle)
+            revive = self._check_external(obstacle, live)
             if self._geometry is None:
                 if len(self._deferred) >= self._max_deferred:
                     raise InvalidMessageError("no_geometry", "no grid known yet and %d messages "
                                               "already waiting" % len(self._deferred))
-                self._deferred.append(obstacle)
+                self._deferred.append((obstacle, live))
                 self._counters["deferred"] += 1
                 _log.debug("%s: no grid yet; message %s v%d from %s waits for the map",
                            self.robot_name, obstacle.uuid, obstacle.version, obstacle.source)
@@ -532,9 +411,11 @@ class SharingHandler:
             self._check_authority(obstacle, entry)
             if entry is None and not self._quotas.allow_new(obstacle.source):
                 return self._quota_drop(obstacle, "source_quota", now)
-        except InvalidMessageError as err:
+        except REFUSED as err:
             self.reject(obstacle.source, obstacle.uuid, err)
             return False
+        if revive:
+            self._revive(obstacle)
         if obstacle.deadline > self._policy.max_lifetime:
             self._counters["capped_deadlines"] += 1
             _log.info("%s: message %s v%d from %s says %d s left; cut to obstacle_duration %d s",
@@ -542,20 +423,28 @@ class SharingHandler:
                       obstacle.deadline, self._policy.max_lifetime)
             obstacle = obstacle.replace(deadline=self._policy.cap_deadline(obstacle.deadline))
         shown = entry is not None and bool(entry.present)
+        # A copy under this robot's own name is its own update handed back by its bridge after a restart (only this
+        # robot publishes under its name): it says who first shared the obstacle, as a live message does.
+        metadata = live or obstacle.source == self.robot_name
         if entry is None:
-            entry = _Entry(obstacle, self._clock(), self._deadlines)
+            entry = Entry(obstacle, self._clock(), self._deadlines, live=metadata)
             self._entries[obstacle.uuid] = entry
             self._quotas.added(entry.owner)
-            entry.apply(obstacle)
+            entry.apply(obstacle, metadata)
             changed = grown = True
             _log.info("%s: added obstacle %s from %s (v%d, %d cells, deadline %d s)", self.robot_name,
                       obstacle.uuid, obstacle.source, obstacle.version, len(entry.present),
                       obstacle.deadline)
         else:
-            rectangle = entry.rectangle
-            changed = entry.apply(obstacle)
-            grown = entry.rectangle is not rectangle
-            entry.note_lease(self._clock(), obstacle.deadline, observed=bool(obstacle.marked))
+            rectangle, creator_known = entry.rectangle, entry.creator_known
+            changed = entry.apply(obstacle, metadata)
+            # a grown rectangle can reach another obstacle; a first share that arrived late makes its
+            # creator known, and only then can it merge (merging.py)
+            grown = entry.rectangle is not rectangle or (not creator_known and entry.creator_known)
+            if live and obstacle.marked:
+                entry.note_deadline(self._clock(), obstacle.deadline)   # an observation renews
+            elif not obstacle.marked:
+                self._counters["clears_kept_lease"] += 1
         self._counters["updates_in"] += 1
         self._to_layer(obstacle)
         if changed:
@@ -569,131 +458,14 @@ class SharingHandler:
             self._compact_deadlines()   # renewals leave stale items; amortised O(1) per update
         return True
 
-    def add_manual(self, rectangle, marked=(), deadline=0, frame_id=""):
-        """Adds an obstacle by hand and shares it like a detected one. `rectangle` is a Rectangle
-        or [min_x, min_y, max_x, max_y]; without `marked`, every cell whose centre lies in the
-        rectangle is marked; deadline 0 = obstacle_duration. Returns the authorised Obstacle;
-        raises InvalidRequestError saying why not."""
-        if self._geometry is None:
-            raise InvalidRequestError("no map grid known yet: cannot turn a rectangle into cells")
-        try:
-            if not isinstance(rectangle, Rectangle):
-                rectangle = Rectangle.from_sequence(rectangle)
-            if isinstance(deadline, bool) or not isinstance(deadline, int) \
-                    or not 0 <= deadline <= obstacle_rules.MAX_UINT32:
-                raise InvalidRequestError("deadline %r is not 0..%d s" % (deadline, obstacle_rules.MAX_UINT32))
-            obstacle = Obstacle(uuid="", marked=(), cleared=(), deadline=0, rectangle=rectangle,
-                                source=self.robot_name, geometry=self._geometry, frame_id=frame_id,
-                                stamp=self._clock())
-            check_message_values(obstacle)  # the rectangle lies on the grid, the stamp is ROS time
-            width, height = rectangle.max_x - rectangle.min_x, rectangle.max_y - rectangle.min_y
-            if max(width, height) > self._max_extent:
-                # An obstacle blocks a pathway; a huge rectangle would make every later
-                # proposal under it redundant on every robot.
-                raise InvalidRequestError("rectangle %s is %g m x %g m, larger than max_obstacle_extent "
-                                          "%g m" % (rectangle, width, height, self._max_extent))
-            marked = tuple(int(c) for c in marked) or self._geometry.cells_in(rectangle)
-            if not marked:
-                raise InvalidRequestError("rectangle %s covers no cell of the map (%s)"
-                                          % (rectangle, self._geometry))
-            obstacle = obstacle.replace(marked=marked)
-            check_message_values(obstacle)
-            check_indexes(obstacle, self._geometry, self._max_cells)
-            self._policy.check_cells(len(marked), self._geometry, "rectangle %s" % rectangle)
-        except InvalidMessageError as err:
-            raise InvalidRequestError(str(err)) from err
-        self._counters["manual"] += 1
-        near = self._near(rectangle, len(marked))
-        if near is None:
-            return self._authorise(obstacle, int(deadline) or self._deadline)
-        update = self._merge_proposal(obstacle, near)
-        if update is None:
-            # the update it would become was refused (and counted): say so, never return None
-            raise InvalidRequestError("rectangle %s lies within merge_distance of obstacle %s, and the "
-                                      "update of it was refused (see the log)" % (rectangle, near.uuid))
-        return update
-
-    def remove(self, uuid=None, rectangle=None, requested_by=""):
-        """Removes obstacles fleet-wide by hand: `uuid`, or every listed obstacle whose rectangle meets
-        `rectangle` (a Rectangle or [min_x, min_y, max_x, max_y]). Each goes out as this robot's update
-        clearing every present cell (as if seen free), to the fleet and to the layer, so every robot drops
-        it (issue 26's rule, issue 28's service). Returns the uuids removed; raises InvalidRequestError
-        saying why nothing could be."""
-        if not requested_by or not str(requested_by).strip():
-            raise InvalidRequestError("say who asks (requested_by): a removal is logged with its requester")
-        if uuid:
-            uuid = self.resolve(uuid)
-            entry = self._entries.get(uuid)
-            if entry is None or not entry.present:
-                raise InvalidRequestError("no obstacle %s is listed here" % uuid)
-            targets = [entry]
-        else:
-            try:
-                if not isinstance(rectangle, Rectangle):
-                    rectangle = Rectangle.from_sequence(rectangle)
-            except (InvalidMessageError, TypeError, ValueError) as err:
-                raise InvalidRequestError("give a uuid or a rectangle [min_x, min_y, max_x, max_y]: %s" % err) \
-                    from None
-            targets = [e for _u, e in sorted(self._entries.items()) if e.present and _meets(e.rectangle, rectangle)]
-            if not targets:
-                raise InvalidRequestError("no listed obstacle meets %s" % (rectangle,))
-        removed = []
-        for entry in targets:
-            clear = Obstacle(uuid=entry.uuid, marked=(), cleared=tuple(sorted(entry.present)),
-                             deadline=remaining_deadline(entry.expires_at - self._clock()),
-                             rectangle=entry.rectangle, source=self.robot_name, geometry=entry.geometry,
-                             version=entry.max_version + 1, frame_id=entry.frame_id, stamp=self._clock())
-            _log.info("%s: obstacle %s (from %s, %d cells) removed by hand, requested by %s", self.robot_name,
-                      entry.uuid, entry.source, len(entry.present), str(requested_by)[:80])
-            self._to_fleet(clear)
-            self._counters["updates_out"] += 1
-            self._to_layer(clear)
-            entry.apply(clear)
-            self._note_shown(entry, True, clear)  # (only listed obstacles are targets)
-            removed.append(entry.uuid)
-        self._on_change()
-        return removed
-
-    def expire(self):
-        """Removes every obstacle whose deadline has passed since its local arrival (no message
-        goes to the fleet; the layer is told). Returns the expired uuids, sorted."""
-        now = self._clock()
-        heap, entries, due = self._deadlines, self._entries, set()
-        while heap and heap[0][0] <= now:
-            _t, uuid = heapq.heappop(heap)
-            entry = entries.get(uuid)
-            if entry is not None and now >= entry.expires_at:   # else: gone, or its expiry moved since
-                due.add(uuid)
-        gone = sorted(due)
-        for uuid in gone:
-            entry = self._forget(uuid)
-            self._counters["expired"] += 1
-            _log.info("%s: obstacle %s expired (%.3f s after arrival at %.3f)", self.robot_name, uuid,
-                      entry.expires_at - entry.arrival, entry.arrival)
-            self._expired_out(uuid)
-        tombs = self._tomb_heap
-        while tombs and tombs[0][0] <= now:
-            until, uuid = heapq.heappop(tombs)
-            if self._tombstones.get(uuid) == until:
-                del self._tombstones[uuid]
-        if len(heap) > 4 * len(entries) + 64:
-            self._compact_deadlines()
-        self._quota_log.flush(now)
-        if gone:
-            self._on_change()
-        return gone
-
-    def _compact_deadlines(self):
-        """Renewals leave items of replaced expiries in the heap: rebuilt from the entries, so it stays
-        O(obstacles)."""
-        self._deadlines[:] = [(e.expires_at, u) for u, e in self._entries.items()]
-        heapq.heapify(self._deadlines)
-
     def _quota_drop(self, obstacle, reason, now):
         """A message beyond its source's quota: counted (in all and per source), logged at most once
         per 10 s per source and reason, state untouched. Returns False (not applied)."""
         self._counters["dropped_" + reason] += 1
-        if reason == "source_quota":
+        if reason == "source_queue_full":
+            hint = ("its queue in this handler holds the most messages waiting per source; obstacle %s v%d dropped. "
+                    "Another source's messages do not wait behind it" % (obstacle.uuid[:40], obstacle.version))
+        elif reason == "source_quota":
             hint = ("it already holds %d live obstacles here (max_obstacles_per_source %d); new obstacle %s "
                     "refused. A robot sharing that many is faulty or hostile; raise ~max_obstacles_per_source "
                     "only if the fleet needs it" % (self._quotas.live[obstacle.source], self._quotas.max_obstacles,
@@ -706,6 +478,11 @@ class SharingHandler:
         self._quota_log.drop(obstacle.source, reason, now, hint)
         return False
 
+    def queue_full(self, obstacle):
+        """The node dropped ``obstacle`` because its source's queue was full: counted per source and logged
+        at most once per 10 s per source, like the quotas."""
+        return self._quota_drop(obstacle, "source_queue_full", self._clock())
+
     def reject(self, source, uuid, error):
         """Drops a message: one log line naming the source robot and the reason, one counter."""
         reason = error.reason if error.reason in DROP_REASONS else "malformed"
@@ -714,24 +491,6 @@ class SharingHandler:
                      source, (uuid or "")[:80], error)
 
     # ----------------------------------------------------------------- internals
-
-    def _forget(self, uuid):
-        """Drops a held obstacle and returns its entry. The uuid (and those it absorbed) is remembered
-        at least obstacle_duration more, so that a late message cannot resurrect the obstacle on this
-        robot only; with stamps checked, until no message for it can pass the stamp check (a replay,
-        issue 27)."""
-        now = self._clock()
-        entry = self._entries.pop(uuid)
-        self._nearby.remove(uuid)
-        self._quotas.removed(entry.owner)
-        until = now + max(self._policy.tombstone_time, entry.deadline)
-        self._tombstones[uuid] = until
-        heapq.heappush(self._tomb_heap, (until, uuid))
-        for alias in [a for a in self._aliases if self.resolve(a) == uuid]:
-            del self._aliases[alias]
-            self._tombstones[alias] = until
-            heapq.heappush(self._tomb_heap, (until, alias))
-        return entry
 
     def _note_shown(self, entry, shown, obstacle):
         """After `obstacle` was applied to `entry`, which had present cells when `shown`: an obstacle left
@@ -751,7 +510,7 @@ class SharingHandler:
         # stamp = when the share was made: the layer's detection time, or now (manual adds).
         shared = obstacle.replace(uuid=self._new_uuid(), version=1, source=self.robot_name,
                                   deadline=deadline, stamp=obstacle.stamp or self._clock())
-        entry = _Entry(shared, self._clock(), self._deadlines)
+        entry = Entry(shared, self._clock(), self._deadlines)
         self._entries[shared.uuid] = entry
         self._quotas.added(entry.owner)
         entry.apply(shared)
@@ -764,125 +523,21 @@ class SharingHandler:
         self._on_change()
         return shared
 
-    def _near(self, rectangle, cells):
-        """The held obstacle (smallest uuid) whose rectangle overlaps `rectangle` or lies within
-        merge_distance of it and that stays within the caps with `cells` more, or None."""
-        near = sorted(u for u in self._nearby.near(rectangle, self._merge_distance)
-                      if self._mergeable(self._entries[u].rectangle, rectangle))
-        for uuid in near:
-            entry = self._entries[uuid]
-            if self._policy.fits(entry.rectangle.union(rectangle), len(entry.present) + cells, entry.geometry):
-                return entry
-        return None
-
-    def _mergeable(self, a, b):
-        """Rectangles that overlap, touch or lie within merge_distance (>= 0) of each other: the
-        gap between overlapping ones is 0."""
-        return a.gap(b) <= self._merge_distance
-
-    def _merge_proposal(self, proposal, entry):
-        """A proposal near a live obstacle is an observation of it: an update (marked cells, the
-        grown rectangle, a renewed lease) sent to the fleet and to our layer, which does not
-        know its proposal became an update."""
-        rectangle = entry.rectangle.union(proposal.rectangle)
-        update = proposal.replace(uuid=entry.uuid, version=entry.max_version + 1, source=self.robot_name,
-                                  deadline=self._deadline, rectangle=rectangle, cleared=(),
-                                  stamp=proposal.stamp or self._clock())
-        try:
-            check_fleet_message(update)
-        except InvalidMessageError as err:
-            self.reject(self.robot_name, entry.uuid, err)
-            return None
-        self._counters["merged_proposals"] += 1
-        self._counters["renewals"] += 1
-        _log.info("%s: proposal %s (%d cells) lies within merge_distance %g m of obstacle %s %s: "
-                  "sent as update v%d of it, rectangle now %s", self.robot_name, proposal.rectangle,
-                  len(proposal.marked), self._merge_distance, entry.uuid, entry.rectangle,
-                  update.version, rectangle)
-        entry.apply(update)
-        entry.note_deadline(self._clock(), self._deadline)
-        self._to_layer(update)
-        self._to_fleet(update)
-        self._counters["updates_out"] += 1
-        self._on_change()
-        self._merge_around(entry.uuid)
-        return update
-
-    def _merge_around(self, uuid):
-        """Restores the invariant "no two held obstacles lie within merge_distance, unless their
-        union exceeds the caps" after the rectangle of `uuid` grew or it was added: the smaller
-        uuid absorbs the other, until nothing near is left (an absorbed rectangle can reach a
-        third obstacle)."""
-        refused = set()  # neighbours whose union with this obstacle would exceed the caps
-        while True:
-            entry = self._entries[uuid]
-            self._nearby.put(uuid, entry.rectangle)
-            near = sorted(u for u in self._nearby.near(entry.rectangle, self._merge_distance)
-                          if u != uuid and u not in refused
-                          and self._mergeable(self._entries[u].rectangle, entry.rectangle))
-            if not near:
-                return uuid
-            # One pair at a time: absorbing is a join, so the merged obstacle is the same in any
-            # order; checked pairwise, no merge makes an obstacle larger than the caps.
-            survivor, absorbed = sorted((uuid, near[0]))
-            if not self._merge_fits(self._entries[survivor], self._entries[absorbed]):
-                refused.add(near[0])
-                continue
-            self._absorb(survivor, absorbed)
-            uuid = survivor
-
-    def _merge_fits(self, a, b):
-        """True when the union of two held obstacles stays within the caps; else counted and logged."""
-        rectangle = a.rectangle.union(b.rectangle)
-        cells = len(a.present) + len(b.present)
-        if cells > self._policy.cell_cap(a.geometry):
-            cells = len(a.present | b.present)
-        if self._policy.fits(rectangle, cells, a.geometry):
-            return True
-        self._counters["merges_refused"] += 1
-        _log.warning("%s: obstacles %s %s (from %s) and %s %s (from %s) lie within merge_distance but "
-                     "are not merged: the union %s with %d cells exceeds max_obstacle_extent %g m or "
-                     "max_obstacle_cells %d", self.robot_name, a.uuid, a.rectangle, a.source, b.uuid,
-                     b.rectangle, b.source, rectangle, cells, self._policy.max_extent,
-                     self._policy.cell_cap(a.geometry))
-        return False
-
-    def _absorb(self, survivor_uuid, absorbed_uuid):
-        survivor, absorbed = self._entries[survivor_uuid], self._entries.pop(absorbed_uuid)
-        self._nearby.remove(absorbed_uuid)
-        self._quotas.removed(absorbed.owner)
-        survivor.absorb(absorbed)
-        self._nearby.put(survivor_uuid, survivor.rectangle)
-        self._aliases[absorbed_uuid] = survivor_uuid
-        self._counters["merged_obstacles"] += 1
-        _log.info("%s: obstacles %s %s and %s %s lie within merge_distance %g m: merged into %s, "
-                  "rectangle now %s", self.robot_name, survivor_uuid, survivor.rectangle, absorbed_uuid,
-                  absorbed.rectangle, self._merge_distance, survivor_uuid, survivor.rectangle)
-        # The layer holds both: it drops the absorbed one and gets its cells under the survivor's
-        # uuid, with their own stamps, so its cells stay the handler's.
-        self._expired_out(absorbed_uuid)
-        left = remaining_deadline(survivor.expires_at - self._clock())
-        by_stamp = {}
-        for cell, stamp in absorbed.stamps.items():
-            marked, cleared = by_stamp.setdefault(stamp, ([], []))
-            (marked if cell in absorbed.present else cleared).append(cell)
-        for (version, source), (marked, cleared) in sorted(by_stamp.items()):
-            self._to_layer(Obstacle(uuid=survivor_uuid, marked=tuple(sorted(marked)),
-                                    cleared=tuple(sorted(cleared)), deadline=left,
-                                    rectangle=survivor.rectangle, source=source, geometry=survivor.geometry,
-                                    version=version, frame_id=survivor.frame_id))
-        self._on_change()
-
-    def _check_external(self, obstacle):
+    def _check_external(self, obstacle, live=True):
         # The same rules the bridge applies to what arrives over MQTT (neither is looser).
         check_fleet_message(obstacle)
-        if obstacle.source == self.robot_name and obstacle.uuid in self._entries:
+        if live and obstacle.source == self.robot_name and obstacle.uuid in self._entries:
             # An echo, or someone else speaking for us about an obstacle we hold. An own obstacle
             # we do not hold is accepted: after a restart, peers give our obstacles back.
             raise InvalidMessageError("own_source", "message claims to come from this robot")
+        revive = False
         if obstacle.uuid in self._tombstones:
-            raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+            since = self._tombstoned_at.get(obstacle.uuid)
+            if not (live and obstacle.marked and since is not None and obstacle.stamp > since):
+                raise InvalidMessageError("expired", "obstacle %s expired here" % obstacle.uuid)
+            revive = True
         self._policy.check_stamp(obstacle.stamp, self._clock())
+        return revive
 
     def _check_authority(self, obstacle, entry):
         """The receiver's caps (issue 27) on one message: its rectangle, its cells, its version.
@@ -890,9 +545,17 @@ class SharingHandler:
         verdict does not depend on the order messages arrive in and robots stay convergent;
         merges, which could join many messages' worth, are capped apart (_merge_fits)."""
         policy = self._policy
-        policy.check_extent(obstacle.rectangle)
-        policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "message")
+        creator = obstacle.source if entry is None else entry.source
+        policy.check_extent(obstacle.rectangle, "rectangle", creator)
+        policy.check_cells(len(obstacle.marked) + len(obstacle.cleared), self._geometry, "message", creator)
         policy.check_version(obstacle.version, 0 if entry is None else entry.max_version)
+        self._check_inside(obstacle, "message from %s" % obstacle.source)
+
+    def _check_inside(self, obstacle, what):
+        """Every cell of the message lies inside its rectangle, no more cells than it holds (issue 43)."""
+        g = self._geometry
+        check_cells_inside(obstacle.rectangle, obstacle.marked, obstacle.cleared, g.resolution, g.origin_x,
+                           g.origin_y, g.size_x, "%s %s v%d" % (what, obstacle.uuid or "(new)", obstacle.version))
 
     def _check_grid(self, obstacle):
         if not self._geometry.matches(obstacle.geometry):

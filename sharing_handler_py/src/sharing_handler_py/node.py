@@ -3,6 +3,7 @@
 Runs as robot_N/sharing_handler; every topic and service name is relative to the robot
 namespace except /diagnostics and the map topic. See the package README for the interface.
 """
+import collections
 import logging
 import sys
 import threading
@@ -13,6 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
+from sharing_msgs.authority import FairQueue
 from sharing_msgs.safe_publisher import SafePublisher
 from sharing_msgs.srv import (AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse, RemoveObstacle,
                               RemoveObstacleResponse)
@@ -24,6 +26,21 @@ from sharing_handler_py.markers import obstacle_markers
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError, InvalidRequestError
 from sharing_handler_py.logic import SharingHandler, remaining_deadline
 from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rectangle
+
+
+#: updates to the fleet kept while no bridge listens (the oldest go first beyond)
+UNSENT_KEPT = 1000
+
+
+class _OnNewSubscriber(rospy.SubscribeListener):
+    """Calls ``callback(publish_single)`` whenever a subscriber connects to the publisher."""
+
+    def __init__(self, callback):
+        rospy.SubscribeListener.__init__(self)
+        self.callback = callback
+
+    def peer_subscribe(self, _topic, _publish_all, publish_single):
+        self.callback(publish_single)
 
 
 class RosoutHandler(logging.Handler):
@@ -101,6 +118,8 @@ def read_params():
         source_update_rate=rospy.get_param("~source_update_rate", 100.0),
         source_update_burst=rospy.get_param("~source_update_burst", 2000),
         list_cost_share=rospy.get_param("~list_cost_share", 0.05),
+        max_sensor_reach=rospy.get_param("~max_sensor_reach", 4.0),
+        source_queue_size=rospy.get_param("~source_queue_size", 200),
     )
 
 
@@ -123,22 +142,35 @@ class HandlerNode:
         self._list_cache = {}       # uuid -> (cells, metadata, SharedObstacle) of the last list
         # One message that cannot be serialised is dropped there; the publisher stays usable.
         self._pub_layer = SafePublisher(
-            lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100),
+            lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100,
+                                    subscriber_listener=_OnNewSubscriber(self._on_new_layer)),
             topic="%s/shared_obstacles" % params.robot_name)
         self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
+        # What goes to the fleet while no bridge listens (it crashed and is starting again: issue 43, item 8) is kept,
+        # and handed to the bridge when it subscribes, deadlines aged: nothing this robot shares is lost that way.
+        self._unsent = collections.deque(maxlen=UNSENT_KEPT)   # (Obstacle, clock time)
         self._pub_fleet = SafePublisher(
-            lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000),
+            lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000,
+                                    subscriber_listener=_OnNewSubscriber(self._on_new_bridge)),
             topic="%s/to_fleet" % params.robot_name)
         self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
                                          latch=True)
         self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         # RViz: the fleet's obstacles with source, age, time left and cells (markers.py), on every change and
-        # at each tick (the ages move)
-        self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1, latch=True)
+        # at each tick (the ages move), only while someone looks. Not latched: a subscriber gets the markers of the
+        # obstacles held when it connects, built then; a latched array would have to be built and serialised on every
+        # change of the list whether or not anyone looks, under the lock (1,200 obstacles held: ~40 ms of CPU each
+        # time, which a flooding login's obstacles made other robots' messages wait for).
+        self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1,
+                                            subscriber_listener=_OnNewSubscriber(self._on_new_markers_subscriber))
+        # Fleet messages wait in a queue per source, served round-robin by one worker (issue 43, item 5): a
+        # login flooding valid obstacles fills only its own queue, and another robot's message waits for at
+        # most one of its messages, not for the flood (rospy's own queue drops the oldest, whoever sent it).
+        self._fleet_inbox = FairQueue(params.source_queue_size)
         self.handler = SharingHandler(
             params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
             on_to_layer=lambda o: self._deliver(self._pub_layer, o),
-            on_to_fleet=lambda o: self._deliver(self._pub_fleet, o),
+            on_to_fleet=self._to_fleet,
             on_expired=lambda u: self._pub_expired.publish(String(data=u)),
             on_change=self._list_changed,
             max_cells_per_message=params.max_cells_per_message,
@@ -149,12 +181,15 @@ class HandlerNode:
             max_clock_skew=params.clock_skew,
             max_obstacles_per_source=params.max_obstacles_per_source,
             source_update_rate=params.source_update_rate,
-            source_update_burst=params.source_update_burst)
+            source_update_burst=params.source_update_burst,
+            max_sensor_reach=params.max_sensor_reach)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
         rospy.Subscriber("obstacle_updates", SharedObstacle, self._on_update, queue_size=1000)
         rospy.Subscriber("from_fleet", SharedObstacle, self._on_fleet, queue_size=1000)
+        # copies restoring state (the bridge's Discover answers, its copy for a restarted handler): never renewals
+        rospy.Subscriber("fleet_state", SharedObstacle, self._on_fleet_state, queue_size=1000)
         rospy.Service("list_obstacles", ListObstacles, self._on_list)
         rospy.Service("add_obstacle", AddObstacle, self._on_add)
         rospy.Service("remove_obstacle", RemoveObstacle, self._on_remove)
@@ -166,6 +201,44 @@ class HandlerNode:
         if params.clock_skew is None:
             rospy.logwarn("%s: max_clock_skew = -1: stamps of fleet messages are not checked, so a replayed "
                           "message is refused only while its uuid is remembered as expired", params.robot_name)
+
+    def _to_fleet(self, obstacle):
+        if self._pub_fleet.get_num_connections() == 0:
+            self._unsent.append((obstacle, rospy.get_time()))
+            return
+        self._deliver(self._pub_fleet, obstacle)
+
+    def _on_new_bridge(self, publish_single):
+        """A bridge subscribed to to_fleet: what this robot shared while none listened goes to it now, oldest first."""
+        with self._lock:
+            unsent, now = list(self._unsent), rospy.get_time()
+            self._unsent.clear()
+        sent = 0
+        for obstacle, made in unsent:
+            left = obstacle.deadline - max(0.0, now - made)
+            if left < 1.0:
+                continue   # it ended meanwhile on this robot: sending it would revive it elsewhere
+            try:
+                publish_single(msg_from_obstacle(obstacle.replace(deadline=int(left))))
+                sent += 1
+            except Exception as err:  # noqa: BLE001 - one bad value must not stop the rest
+                rospy.logwarn("%s: obstacle %s not handed to the bridge: %s", self.params.robot_name, obstacle.uuid, err)
+        if sent:
+            rospy.loginfo("%s: a bridge subscribed: handed it the %d updates made while none listened",
+                          self.params.robot_name, sent)
+
+    def _on_new_layer(self, publish_single):
+        """A layer subscribed (move_base started, or started again after a crash: issue 43, item 8): it gets every
+        obstacle held here, full state, on its own connection."""
+        with self._lock:
+            held = self.handler.obstacles()
+        for h in held:
+            try:
+                publish_single(msg_from_obstacle(h.to_obstacle()))
+            except Exception as err:  # noqa: BLE001 - one bad value must not stop the rest
+                rospy.logwarn("%s: obstacle %s not handed to a new layer: %s", self.params.robot_name, h.uuid, err)
+        if held:
+            rospy.loginfo("%s: a layer subscribed: handed it the %d obstacles held", self.params.robot_name, len(held))
 
     def _deliver(self, publisher, obstacle):
         try:
@@ -200,10 +273,47 @@ class HandlerNode:
                 self.handler.on_internal_update(obstacle)
 
     def _on_fleet(self, msg):
-        obstacle = self._convert(msg, "from_fleet")
-        if obstacle is not None:
+        self._queue_fleet(msg, "from_fleet", True)
+
+    def _on_fleet_state(self, msg):
+        self._queue_fleet(msg, "fleet_state", False)
+
+    def _queue_fleet(self, msg, topic, live):
+        """rospy's thread: only sorts the message behind its source (fair delivery); the worker converts and applies.
+
+        This thread reads one connection per publisher in arrival order: whatever it does per message, a flood's
+        messages ahead of another robot's are done first. Converting here (validating every cell index) put a
+        flooding login's whole backlog in front of the honest robot's message (bench_flood: 0.6 s at p99 in this
+        handler alone), so conversion waits in the source's queue like the rest of the work."""
+        if not self._fleet_inbox.put(msg.source, (msg, topic, live)):
             with self._lock:
+                self.handler.queue_full(msg)      # counted and named per source: uuid, version, source suffice
+
+    def serve_fleet(self, stop):
+        """The worker: converts and applies queued fleet messages, one source at a time in turn, until ``stop``."""
+        while not stop.is_set():
+            if self.serve_one(timeout=0.5):
+                # give rospy's reading thread the GIL now, not after the 5 ms switch interval: while this worker
+                # is busy with a flood it would otherwise read about one message per 5 ms, and another robot's
+                # message would sit unsorted behind the flood's in the socket
+                time.sleep(0)
+
+    def serve_one(self, timeout=None):
+        """Converts and applies the next queued fleet message (round-robin over sources); False when none came
+        within ``timeout`` s."""
+        item = self._fleet_inbox.get(timeout=timeout)
+        if item is None:
+            return False
+        msg, topic, live = item[1]
+        obstacle = self._convert(msg, topic)
+        if obstacle is None:
+            return True
+        with self._lock:
+            if live:
                 self.handler.on_external(obstacle)
+            else:
+                self.handler.on_state(obstacle)
+        return True
 
     def _on_map(self, grid):
         try:
@@ -289,18 +399,28 @@ class HandlerNode:
         array.obstacles = [self._list_entry(h, now, fresh) for h in self.handler.obstacles()]
         self._list_cache = fresh
         self._pub_list.publish(array)
-        self._publish_markers(changed=True)
+        self._publish_markers()
         finished = time.monotonic()
         self._list_due = finished + (finished - started) / self.params.list_cost_share
 
-    def _publish_markers(self, changed=False):
-        """On every change of the list, so that the latched array a late subscriber (RViz started later,
-        rostopic echo) gets first is the list as it is; at each tick only while someone looks (the
-        labels' ages move)."""
-        if not changed and self._pub_markers.get_num_connections() == 0:
+    def _publish_markers(self):
+        """On every change of the list and at each tick (the labels' ages move), only while someone looks; a
+        subscriber that connects gets the current markers first (_on_new_markers_subscriber)."""
+        if self._pub_markers.get_num_connections() == 0:
             return
-        self._pub_markers.publish(obstacle_markers(self.handler.obstacles(), rospy.get_time(),
-                                                   self._map_frame or "map", rospy.Time.now()))
+        self._pub_markers.publish(self._markers())
+
+    def _markers(self):
+        return obstacle_markers(self.handler.obstacles(), rospy.get_time(), self._map_frame or "map", rospy.Time.now())
+
+    def _on_new_markers_subscriber(self, publish_single):
+        """RViz (or rostopic echo) connected: the obstacles held now, on its own connection."""
+        with self._lock:
+            markers = self._markers()
+        try:
+            publish_single(markers)
+        except Exception as err:  # noqa: BLE001 - a closed connection must not disturb the rest
+            rospy.logwarn("%s: markers not sent to a new subscriber: %s", self.params.robot_name, err)
 
     def _list_entry(self, held, now, fresh):
         """Full-state message of one held obstacle. The message built for the last list is
@@ -384,6 +504,9 @@ def main(argv=None):
         rospy.logfatal(message)
         print(message, file=sys.stderr)
         sys.exit(2)
-    HandlerNode(params)
+    node = HandlerNode(params)
+    stop = threading.Event()
+    rospy.on_shutdown(stop.set)
+    threading.Thread(target=node.serve_fleet, args=(stop,), name="sharing_handler fleet inbox", daemon=True).start()
     publisher_links.start_watch(rospy.get_name())
     rospy.spin()

@@ -278,6 +278,11 @@ class HandlerParams:
     source_update_rate: float = 100.0      # messages per s per source (token bucket) ...
     source_update_burst: int = 2000        # ... with this burst; the excess is dropped
     list_cost_share: float = 0.05          # at most this share of time goes to rebuilding the latched list
+    # issue 43: what one robot can see; a robot's obstacle is at most 2 x (this + 0.5 m) across (0: only
+    # max_obstacle_extent bounds it)
+    max_sensor_reach: float = 4.0
+    # issue 43: fleet messages waiting per source before the handler takes them (fair delivery)
+    source_queue_size: int = 200
 
     def __post_init__(self):
         def bad(name, why):
@@ -316,13 +321,16 @@ class HandlerParams:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
                 value == -1 or 0 <= value <= 3600):
             bad("max_clock_skew", "must be 0..3600 seconds, or -1 (stamps not checked)")
-        for name, low in (("max_obstacles_per_source", 1), ("source_update_burst", 1)):
+        for name, low in (("max_obstacles_per_source", 1), ("source_update_burst", 1), ("source_queue_size", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 bad(name, "must be an integer >= %d" % low)
         value = self.source_update_rate
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1e9:
             bad("source_update_rate", "must be a positive number of messages per second")
+        value = self.max_sensor_reach
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1000:
+            bad("max_sensor_reach", "must be 0..1000 metres (0: robots' obstacles bounded by max_obstacle_extent alone)")
         value = self.list_cost_share
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 1:
             bad("list_cost_share", "must be in (0, 1]")

@@ -17,9 +17,10 @@ import math
 import uuid as uuidlib
 from collections import Counter, namedtuple
 
+from sharing_msgs.authority import MASTER_CONTROL, AuthorityError, PeerPolicy
 from vda5050_bridge import schemas
 
-MASTER_SOURCE = "master_control"
+MASTER_SOURCE = MASTER_CONTROL   # the source of master control's areas (sharing_msgs.authority)
 ERROR_TYPE = "fleetObstacleOnPath"
 BLOCK_ACTION = "fleetBlockArea"
 UNBLOCK_ACTION = "fleetUnblockArea"
@@ -31,6 +32,7 @@ Edge = namedtuple("Edge", "edge_id sequence_id released start end")
 Order = namedtuple("Order", "order_id order_update_id nodes edges")
 Blocked = namedtuple("Blocked", "kind element_id sequence_id obstacle")  # kind: "edgeId" | "nodeId"
 Area = namedtuple("Area", "uuid key polygon rect")             # a master-control blocked area
+Rect = namedtuple("Rect", "min_x min_y max_x max_y")
 
 
 class BadInput(ValueError):
@@ -257,6 +259,8 @@ class Limits:
         self.max_vertices = max_vertices
         self.max_extent = max_extent
         self.max_coordinate = max_coordinate
+        # sharing_msgs.authority: the same extent rule the handler and the Coaty bridge apply
+        self.policy = PeerPolicy(max_extent=max_extent, max_lifetime=1)
 
 
 def decode(payload, version, topic, manufacturer, serial_number, limits):
@@ -308,10 +312,12 @@ def _polygon(vertices, what, limits):
         if not (math.isfinite(x) and math.isfinite(y)) or max(abs(x), abs(y)) > limits.max_coordinate:
             raise BadInput("absurd_zone", "%s: vertex (%r, %r) out of range" % (what, x, y))
         poly.append((float(x), float(y)))
-    rect = (min(p[0] for p in poly), min(p[1] for p in poly), max(p[0] for p in poly), max(p[1] for p in poly))
-    if rect[2] - rect[0] > limits.max_extent or rect[3] - rect[1] > limits.max_extent:
-        raise BadInput("absurd_zone", "%s: extent %.1f x %.1f m > %.1f m" % (
-            what, rect[2] - rect[0], rect[3] - rect[1], limits.max_extent))
+    rect = Rect(min(p[0] for p in poly), min(p[1] for p in poly), max(p[0] for p in poly), max(p[1] for p in poly))
+    try:
+        # the fleet's rule of authority for an obstacle's extent, with master control's own cap
+        limits.policy.check_extent(rect, what)
+    except AuthorityError as err:
+        raise BadInput("absurd_zone", err.detail) from None
     area = 0.5 * abs(sum(poly[i][0] * poly[(i + 1) % len(poly)][1] - poly[(i + 1) % len(poly)][0] * poly[i][1]
                          for i in range(len(poly))))
     if area <= 1e-9:

@@ -5,9 +5,15 @@ In ROS: subscribes ``shared_obstacle_list`` (the handler's latched SharedObstacl
 map (``~map_topic``, for the grid the master-control areas are drawn on), optionally ``vda5050_order``
 (std_msgs/String: a VDA 5050 order as JSON, for systems whose orders come from ROS); publishes
 ``from_fleet`` (SharedObstacle, source ``master_control``: an external obstacle to the handler,
-as the Coaty bridge delivers a peer's) and ``/diagnostics`` (the counters)."""
+as the Coaty bridge delivers a peer's) and ``/diagnostics`` (the counters).
+
+The broker: ``~broker_url_param`` (a parameter holding ``mqtt://host:port``, as run_broker sets it; waited for
+up to ``~broker_wait`` s) or ``~broker_host``/``~broker_port``; on the fleet's secure broker the login
+``~username`` (default: the serial number) with ``~password_file``, and ``~tls_ca``/``~tls_cert``/``~tls_key``
+for mqtts (issue 43, item 7)."""
 import threading
 import time
+import urllib.parse
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -35,6 +41,8 @@ class Node:
                           "beside the handler: ROS_NAMESPACE=robot_0 rosrun vda5050_bridge vda5050_bridge (or "
                           "__ns:=robot_0 in a launch group), or set ~robot_name if this robot has no namespace")
         self.robot = rospy.get_param("~robot_name", ns.replace("/", "_") or "robot")
+        if rospy.has_param("~password_file") and not rospy.has_param("~username"):
+            rospy.set_param("~username", rospy.get_param("~serial_number", self.robot))   # the vehicle's login
         version = rospy.get_param("~protocol_version", "2.1.0")
         self.bridge = core.BridgeCore(
             version, rospy.get_param("~manufacturer", "fleet"), rospy.get_param("~serial_number", self.robot),
@@ -50,10 +58,13 @@ class Node:
         self.pub = rospy.Publisher("from_fleet", SharedObstacle, queue_size=100,
                                    subscriber_listener=_Resend(self))
         self.diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=2)
+        host, port, tls = broker_address()
         self.client = VdaMqttClient(
-            self.bridge, rospy.get_param("~broker_host", "127.0.0.1"), int(rospy.get_param("~broker_port", 1883)),
-            interface_name=rospy.get_param("~interface_name", "uagv"), on_areas=self.on_areas,
-            log=lambda level, line: rospy.logwarn(line))
+            self.bridge, host, port, interface_name=rospy.get_param("~interface_name", "uagv"), on_areas=self.on_areas,
+            log=lambda level, line: (rospy.logerr if level >= 40 else rospy.logwarn)(line),
+            username=rospy.get_param("~username", ""), password_file=rospy.get_param("~password_file", ""),
+            tls_ca=rospy.get_param("~tls_ca", ""), tls_cert=rospy.get_param("~tls_cert", ""),
+            tls_key=rospy.get_param("~tls_key", ""), tls=tls)
         self.started = time.monotonic()
         self.warned = {}           # what was warned about ("broker", "list") -> time.monotonic() of the last warning
         self.list_sub = rospy.Subscriber("shared_obstacle_list", SharedObstacleArray, self.on_list, queue_size=1)
@@ -151,9 +162,9 @@ class Node:
         now = time.monotonic()
         if not self.client.connected.is_set() and self._due("broker", now):
             rospy.logwarn("%s: vda5050_bridge: VDA 5050 broker %s:%d not reachable for %.0f s: master control gets no "
-                          "state from this robot and none of its blocked areas; retrying. Set ~broker_host and "
-                          "~broker_port to master control's broker", self.robot, self.client.host, self.client.port,
-                          now - self.started)
+                          "state from this robot and none of its blocked areas; retrying. Set ~broker_url_param (or "
+                          "~broker_host and ~broker_port) to master control's broker", self.robot, self.client.host,
+                          self.client.port, now - self.started)
         if self.list_sub.get_num_connections() == 0 and self._due("list", now):
             rospy.logwarn("%s: vda5050_bridge: nothing publishes %s for %.0f s: no fleet obstacle reaches master "
                           "control. Is this robot's sharing_handler running in %s?", self.robot,
@@ -163,9 +174,13 @@ class Node:
         self.check_links()
         with self.client.lock:
             counters = dict(self.bridge.counters)
+        connected = self.client.connected.is_set()
         status = DiagnosticStatus(name="vda5050_bridge: %s" % self.robot, hardware_id=self.client.prefix,
-                                  level=DiagnosticStatus.OK if self.client.connected.is_set() else DiagnosticStatus.WARN,
-                                  message="connected" if self.client.connected.is_set() else "not connected")
+                                  level=DiagnosticStatus.OK if connected else DiagnosticStatus.WARN,
+                                  message="connected" if connected else "not connected")
+        if not connected and self.client.tls_problem:
+            status.level = DiagnosticStatus.ERROR
+            status.message = "not connected: " + self.client.tls_problem
         status.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(counters.items())]
         array = DiagnosticArray(status=[status])
         array.header.stamp = rospy.Time.now()
@@ -181,7 +196,30 @@ class _Resend(rospy.SubscribeListener):
         self.node.resend(publish_single)
 
 
+def broker_address():
+    """(host, port, tls) from ~broker_url_param (waited for, as run_broker sets it) or ~broker_host/~broker_port."""
+    name = rospy.get_param("~broker_url_param", "")
+    if not name:
+        return rospy.get_param("~broker_host", "127.0.0.1"), int(rospy.get_param("~broker_port", 1883)), False
+    deadline = rospy.get_time() + float(rospy.get_param("~broker_wait", 30.0))
+    while not rospy.has_param(name) and not rospy.is_shutdown():
+        if rospy.get_time() > deadline:
+            raise ValueError("parameter broker_url_param = %r: not set within ~broker_wait s (is run_broker running?)"
+                             % name)
+        rospy.sleep(0.1)
+    url = urllib.parse.urlsplit(rospy.get_param(name))
+    if url.scheme not in ("mqtt", "tcp", "mqtts", "ssl", "tls") or not url.hostname:
+        raise ValueError("parameter %s = %r: not mqtt://host:port or mqtts://host:port" % (name, rospy.get_param(name)))
+    tls = url.scheme in ("mqtts", "ssl", "tls")
+    return url.hostname, url.port or (8883 if tls else 1883), tls
+
+
 def main():
     rospy.init_node("vda5050_bridge")
-    Node()
+    try:
+        node = Node()
+    except ValueError as err:
+        rospy.logfatal("vda5050_bridge: bad parameter: %s", err)
+        raise SystemExit(2)
+    rospy.loginfo("%s: vda5050_bridge running", node.robot)
     rospy.spin()

@@ -1,5 +1,7 @@
 """Fair delivery (issue 27, item 3): one queue per sender, served round-robin. Pure Python.
 
+Used by the Coaty bridge (per MQTT sourceId, between paho's thread and its worker).
+
 paho reads every MQTT message in the order the broker sent them, one thread. When the work
 behind a message (JSON, index decoding, the handler) is done in that thread, 5,000 messages of
 one flooding peer sit in front of every other robot's obstacle. So the MQTT thread only sorts

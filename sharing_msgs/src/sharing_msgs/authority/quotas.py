@@ -9,7 +9,7 @@ more and delayed everyone else's for minutes. So each receiver bounds, per sourc
 
 Buckets and counts are per source, so one source's flood empties only its own bucket: the robot's
 own obstacles, a master control's and every other peer's go on as before. ``TokenBuckets`` is
-also what the bridge uses per MQTT sourceId (coaty_bridge.client), before a payload is parsed.
+also what the Coaty bridge uses per MQTT sourceId, before a payload is parsed.
 """
 import collections
 import logging
