@@ -376,8 +376,16 @@ class BridgeNode:
         if self.fleet.forget(robot):
             rospy.loginfo("%s: fleet robot %s withdrew its footprint (sourceId %s)", self.config.robot_name, robot,
                           topic.source_id)
-            self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time(),
-                                                            self.footprint_config.robot_timeout))
+            try:
+                self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time(),
+                                                                self.footprint_config.robot_timeout))
+            except rospy.ROSException:
+                # While the launch shuts down, peers' bridges withdraw their footprints as ours closes its
+                # topics: nobody is left to tell, so that is no error. Any other time it is one.
+                if not rospy.is_shutdown():
+                    raise
+                rospy.logdebug("%s: %s withdrew its footprint while this node shut down", self.config.robot_name,
+                               robot)
 
     def _footprint_tick(self, _event=None):
         """At footprint_rate: advertise this robot's footprint while it is fresh, forget silent fleet
