@@ -208,3 +208,28 @@ def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_
     sent = counter(holder_small, "resolves_sent")
     assert 20 // 4 <= sent < 20, sent
     assert counter(joiner_small, "dropped.payload_too_large") == 0
+
+
+def test_a_resolve_is_taken_just_inside_discover_window_and_ignored_just_outside(make_update):
+    """A Resolve answers this robot's Discover only within discover_window (30 s) of it: at 29.9 s it is taken, at
+    30.1 s it is ignored (counted), whatever it carries."""
+    now = [1000.0]
+    received = []
+    client = CoatyBridgeClient(BridgeConfig("robot_1", discover_window=30.0, **FAST_PEERS),
+                               lambda update, topic: received.append(update.uuid), clock=lambda: now[0])  # not started
+    client._send = lambda topic, payload, queue=True, **_: None
+    client._discover_obstacles()
+    (correlation_id,) = client._pending_discovers
+    topic = str(Topic("fleet", "RSV", identity_for("fleet", "robot_0"), correlation_id=correlation_id))
+
+    def resolve(update):
+        return codec.resolve_payload(codec.obstacle_to_object(update, codec.DEFAULT_OBJECT_TYPE))
+    inside, outside = make_update(), make_update()
+    now[0] = 1000.0 + 29.9
+    client.handle(topic, resolve(inside))
+    assert received == [inside.uuid]
+    ignored = counter(client, "ignored")
+    now[0] = 1000.0 + 30.1
+    client.handle(topic, resolve(outside))
+    assert received == [inside.uuid], "a Resolve 30.1 s after the Discover was taken"
+    assert counter(client, "ignored") == ignored + 1
