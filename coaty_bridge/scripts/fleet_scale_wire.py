@@ -115,3 +115,30 @@ def percentile(values, q):
     if not values:
         return float("nan")
     return values[min(len(values) - 1, int(math.ceil(q * len(values))) - 1)]
+
+
+def is_driving(index, fraction):
+    """Whether robot ``index`` drives: ``fraction`` of the robots, spread evenly over the indexes."""
+    return int((index + 1) * fraction) > int(index * fraction)
+
+
+def message_kind(topic):
+    """What a received message is, for the byte breakdown: Coaty event and, for Advertises and
+    Channels, whether it is an obstacle, a footprint or a heartbeat."""
+    parts = topic.split("/")
+    event = parts[3] if len(parts) > 3 else "?"
+    if event.startswith("ADV::"):
+        return "footprint" if "RobotFootprint" in event else "obstacle"
+    if event.startswith("CHN:"):
+        for kind in ("heartbeat", "echo"):   # peers' heartbeats; the own echo (liveness.py)
+            if kind in event.lower():
+                return kind
+        return "channel"
+    return event.split("::")[0].lower()
+
+
+def samples_note(n):
+    """A latency column's sample count, and why when below 30 (a p99 of fewer is its maximum or less)."""
+    if n >= 30:
+        return "n = %d updates" % n
+    return "n = %d < 30: only %d updates in the measured window; raise --duration or --robots" % (n, n)
