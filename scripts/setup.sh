@@ -66,6 +66,30 @@ else
   apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
+# The interop tests' outside implementations, pinned, from the npm registry, each into its own cache outside
+# the repository (the tests read the same places): the Coaty JS library and vda-5050-lib (an independent
+# VDA 5050 master control). Without npm or the registry this warns and goes on; those tests then skip, saying why.
+npm_package() {  # cache folder, package name, version, extra npm flags...
+  local cache="$1" name="$2" version="$3"
+  shift 3
+  if [ -f "$cache/node_modules/$name/package.json" ] && \
+      grep -q "\"version\": *\"$version\"" "$cache/node_modules/$name/package.json"; then
+    echo "setup: npm $name@$version present in $cache"
+  elif ! command -v npm >/dev/null 2>&1; then
+    echo "setup: WARNING: npm missing, $name@$version not installed (its interop test will skip)" >&2
+  else
+    mkdir -p "$cache"
+    if npm install --prefix "$cache" --no-audit --no-fund "$@" "$name@$version" >"$cache/npm-install.log" 2>&1; then
+      echo "setup: npm $name@$version installed into $cache"
+    else
+      echo "setup: WARNING: npm install $name@$version failed (its interop test will skip or fail, saying" \
+        "why): $(tail -n 3 "$cache/npm-install.log")" >&2
+    fi
+  fi
+}
+npm_package "${FLEET_COATY_CACHE:-$HOME/.cache/fleet-coaty-interop}" @coaty/core 2.4.1 --legacy-peer-deps "rxjs@^6.6.7"
+npm_package "${FLEET_VDA_CACHE:-$HOME/.cache/fleet-vda5050-interop}" vda-5050-lib 1.4.0
+
 # Upstream move_base, costmap_2d, map_server, fake_localization and Stage: from the distribution, the
 # cache, or built now from the pinned sources (upstream/README.md).
 /usr/bin/python3 upstream/build_upstream.py

@@ -103,7 +103,9 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
     receiving bridge passes each one on at once; here the heartbeat is slow (0.5 Hz) so that neither can
     pass for the other."""
     params = ["broker_url:=" + broker.url, "footprint_rate:=0.5", "robot_timeout:=5.0"]
-    ros_graph.bridge("robot_0", *params)
+    # near_distance 0: every advert precise. robot_1 advertises nothing, so with the default robot_0 would know no
+    # robot near it and advertise every footprint_far_move only (test_footprint_adverts.py covers that)
+    ros_graph.bridge("robot_0", *params, "footprint_near_distance:=0.0")
     ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
     probe = ros_graph.probe("robot_0", "robot_1")
     wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")

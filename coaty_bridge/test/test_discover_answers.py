@@ -208,3 +208,78 @@ def test_a_discover_is_answered_in_batches_of_obstacles_each_within_the_payload_
     sent = counter(holder_small, "resolves_sent")
     assert 20 // 4 <= sent < 20, sent
     assert counter(joiner_small, "dropped.payload_too_large") == 0
+
+
+def test_a_resolve_is_taken_just_inside_discover_window_and_ignored_just_outside(make_update):
+    """A Resolve answers this robot's Discover only within discover_window (30 s) of it: at 29.9 s it is taken, at
+    30.1 s it is ignored (counted), whatever it carries."""
+    now = [1000.0]
+    received = []
+    client = CoatyBridgeClient(BridgeConfig("robot_1", discover_window=30.0, **FAST_PEERS),
+                               lambda update, topic: received.append(update.uuid), clock=lambda: now[0])  # not started
+    client._send = lambda topic, payload, queue=True, **_: None
+    client._discover_obstacles()
+    (correlation_id,) = client._pending_discovers
+    topic = str(Topic("fleet", "RSV", identity_for("fleet", "robot_0"), correlation_id=correlation_id))
+
+    def resolve(update):
+        return codec.resolve_payload(codec.obstacle_to_object(update, codec.DEFAULT_OBJECT_TYPE))
+    inside, outside = make_update(), make_update()
+    now[0] = 1000.0 + 29.9
+    client.handle(topic, resolve(inside))
+    assert received == [inside.uuid]
+    ignored = counter(client, "ignored")
+    now[0] = 1000.0 + 30.1
+    client.handle(topic, resolve(outside))
+    assert received == [inside.uuid], "a Resolve 30.1 s after the Discover was taken"
+    assert counter(client, "ignored") == ignored + 1
+
+
+def test_a_robot_receives_the_resolves_to_its_own_discovers_only(make_client, make_update, wait_for):
+    """Each robot subscribes to the Resolves of its pending Discovers, not to every Resolve of the namespace: with
+    the wildcard, every robot received every catch-up of every driving robot entering new obstacle areas. Checked
+    after an ordered event: robot_0's Advertise sent after its Resolves reaches the bystander after them."""
+    holder, bystander = start_fleet(make_client, wait_for, ["robot_0", "robot_2"])
+    by_0 = make_update(source="robot_0")
+    holder.set_current_obstacles([by_0])
+    seen = []
+    handle = bystander.handle
+
+    def recording(topic_text, payload):
+        seen.append(topic_text)
+        handle(topic_text, payload)
+    bystander.handle = recording
+    joiner = make_client("robot_3", **FAST_PEERS)
+    wait_for(lambda: by_0.uuid in {u.uuid for u in joiner.received_updates}, what="the obstacle at the joining robot")
+    assert counter(holder, "resolves_sent") >= 1
+    after = make_update(source="robot_0")
+    holder.publish_obstacle(after)
+    wait_for(lambda: after.uuid in {u.uuid for u in bystander.received_updates}, what="robot_0's later Advertise")
+    assert not [t for t in seen if "/RSV/" in t], "a Resolve to robot_3's Discover reached robot_2"
+    assert by_0.uuid in {u.uuid for u in joiner.received_updates}
+
+
+def test_the_resolve_subscription_of_a_discover_ends_with_its_window():
+    """Subscribed before the Discover goes out; unsubscribed at the first Discover after discover_window (30 s), not at
+    one just inside it."""
+    now = [1000.0]
+    calls = []
+
+    class Paho:
+        def subscribe(self, topic, qos=0):
+            calls.append(("sub", topic))
+
+        def unsubscribe(self, topics):
+            calls.append(("unsub", tuple(topics)))
+    client = CoatyBridgeClient(BridgeConfig("robot_1", discover_window=30.0), lambda u, t: None, clock=lambda: now[0])
+    client._mqtt = Paho()
+    client._send = lambda topic, payload, queue=True, **_: calls.append(("send", topic))
+    client._discover_obstacles()
+    (first,) = client._pending_discovers
+    assert calls[0] == ("sub", "coaty/+/fleet/RSV/+/" + first) and calls[1][0] == "send" and first in calls[1][1]
+    now[0] += 29.9
+    client._discover_obstacles()
+    assert not [c for c in calls if c[0] == "unsub"]
+    now[0] += 0.2   # the first is 30.1 s old
+    client._discover_obstacles()
+    assert [c for c in calls if c[0] == "unsub"] == [("unsub", ("coaty/+/fleet/RSV/+/" + first,))]

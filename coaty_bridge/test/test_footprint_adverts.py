@@ -144,3 +144,89 @@ def test_a_withdrawn_footprint_is_forgotten_at_once_and_only_its_sender_may_with
     finally:
         listener.stop(timeout=0.5)
         parked.stop(timeout=0.5)
+
+
+# --- far from every known robot: adverts every far_move, not every min_move ----------------------------------------
+
+def drive(schedule, speed, seconds, near=lambda t: True, topic_rate=5.0, rate=2.0):
+    """A robot driving along x at ``speed`` with its footprint topic at ``topic_rate`` and the tick at ``rate``;
+    ``near(t)`` says whether a known robot is within the near distance. Returns (time, x, validFor) per advert."""
+    sent = []
+    steps = int(round(seconds * topic_rate))
+    for k in range(steps + 1):
+        now = k / topic_rate
+        points = shifted(SQUARE, speed * now)
+        valid_for = schedule.on_footprint(points, now, near(now))
+        if valid_for is None and abs(now * rate - round(now * rate)) < 1e-9:
+            valid_for = schedule.on_tick(points, now, near(now))
+        if valid_for is not None:
+            schedule.sent(points, now, valid_for)
+            sent.append((now, round(speed * now, 6), valid_for))
+    return sent
+
+
+def far_schedule():
+    return fp.AdvertSchedule(rate=2.0, min_move=0.1, parked_interval=30.0, far_move=1.0)
+
+
+def test_a_driving_robot_far_from_every_known_robot_advertises_every_far_move():
+    near = drive(far_schedule(), 0.65, 30.0)
+    far = drive(far_schedule(), 0.65, 30.0, near=lambda t: False)
+    assert len(near) >= 150, len(near)            # 0.65 m/s at 5 Hz: every footprint moved 0.13 m
+    assert 18 <= len(far) <= 22, len(far)          # 19.5 m: one advert per metre
+    # after the first (precise) advert and the first far one, the next heartbeat tick: one per metre driven
+    moves = [b[1] - a[1] for a, b in zip(far[1:], far[2:])]
+    assert all(0.99 <= m <= 1.2 for m in moves), moves
+    assert all(v == fp.PARKED_VALIDITY * fp.FAR_INTERVAL for _, _, v in far[1:]), "peers must keep it between adverts"
+
+
+def test_far_move_just_inside_and_just_outside():
+    schedule = far_schedule()
+    schedule.sent(SQUARE, 0.0, 0.0)
+    assert schedule.on_footprint(shifted(SQUARE, 0.99), 0.5, False) is None
+    assert schedule.on_footprint(shifted(SQUARE, 1.0), 0.6, False) == fp.PARKED_VALIDITY * fp.FAR_INTERVAL
+
+
+def test_a_far_robot_coming_near_advertises_at_once():
+    sent = drive(far_schedule(), 0.65, 10.0, near=lambda t: t >= 5.1)
+    assert any(t == 5.2 or abs(t - 5.2) < 1e-9 for t, _, _ in sent), sent   # the first near footprint that moved 0.1 m
+    after = [s for s in sent if s[0] > 5.1]
+    assert all(v == 0.0 for _, _, v in after) and len(after) >= 20
+
+
+def test_a_slow_far_robot_beats_every_far_interval_and_is_not_parked():
+    sent = drive(far_schedule(), 0.08, 40.0, near=lambda t: False)   # 0.1 m in 1.25 s: moving; 1 m in 12.5 s
+    gaps = [b[0] - a[0] for a, b in zip(sent, sent[1:])]
+    assert gaps and all(g <= fp.FAR_INTERVAL + 0.5 for g in gaps), gaps
+    # the first second is a start from standing (parked, as before); once it moved 0.1 m it is a far driving robot
+    assert all(v == fp.PARKED_VALIDITY * fp.FAR_INTERVAL for t, _, v in sent if t > 2.0), "taken for parked while moving"
+    assert len([s for s in sent if s[0] > 2.0]) >= 3
+
+
+def test_far_move_zero_keeps_every_robot_near():
+    assert len(drive(fp.AdvertSchedule(2.0, 0.1, 30.0, far_move=0.0), 0.65, 30.0, near=lambda t: False)) >= 150
+
+
+def test_near_distance_just_inside_and_just_outside():
+    peer = shifted(SQUARE, 4.99)
+    assert fp.near_any(SQUARE, [peer], 5.0)
+    assert not fp.near_any(SQUARE, [shifted(SQUARE, 5.01)], 5.0)
+    assert not fp.near_any(SQUARE, [], 5.0)
+    assert fp.near_any(SQUARE, [], 0.0), "near_distance 0: every advert precise"
+
+
+@pytest.mark.parametrize("kwargs, error", [
+    (dict(near_distance=100.0), None), (dict(near_distance=100.1), "footprint_near_distance = 100.1"),
+    (dict(near_distance=-0.1), "footprint_near_distance = -0.1"),
+    (dict(far_move=10.0), None), (dict(far_move=10.1), "footprint_far_move = 10.1"),
+    (dict(far_move=0.1), None), (dict(far_move=0.09), "footprint_far_move = 0.09"),
+    (dict(far_move=0.05, near_distance=0.0), None),
+])
+def test_the_node_checks_near_distance_and_far_move(kwargs, error):
+    from coaty_bridge.node import FootprintConfig
+    if error is None:
+        config = FootprintConfig(**kwargs)
+        assert config.schedule().far_move == (config.far_move if config.near_distance > 0 else 0.0)
+    else:
+        with pytest.raises(ValueError, match=error.replace(".", r"\.")):
+            FootprintConfig(**kwargs)

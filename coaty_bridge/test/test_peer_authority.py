@@ -307,6 +307,23 @@ def test_attack_10_a_building_sized_footprint_is_not_a_robot(fleet, observer, wa
     assert [f.robot for f in robot.footprints] == ["robot_1"] and robot.footprints[0].points == SMALL
 
 
+
+def test_attack_10_the_extent_cap_holds_on_the_longer_side_just_outside_and_just_inside(fleet, observer, wait_for):
+    """max_footprint_extent (5 m by default) bounds the longer side of the bounding box: 0.5 x 5.05 m and
+    5.05 x 0.5 m are dropped, 0.5 x 4.95 m is taken. The taken one is sent last, so when it has arrived the two
+    before it have been handled (one sender, one connection: in order)."""
+    assert fp.DEFAULT_MAX_FOOTPRINT_EXTENT == 5.0
+    robot = fleet.join("robot_0", footprint_area_size=0)
+
+    def box(width, height):
+        return ((1.0, 1.0), (1.0 + width, 1.0), (1.0 + width, 1.0 + height), (1.0, 1.0 + height))
+    _advert(observer, "robot_1", box(0.5, 5.05))
+    _advert(observer, "robot_2", box(5.05, 0.5))
+    _advert(observer, "robot_3", box(0.5, 4.95))
+    wait_for(lambda: robot.footprints, what="the 0.5 x 4.95 m advert")
+    assert [f.robot for f in robot.footprints] == ["robot_3"]
+    assert robot.client.counters().get("dropped.footprint_too_large") == 2
+
 def test_attack_10_only_known_robots_footprints_are_taken(fleet, observer, wait_for, caplog):
     import logging
     robot = fleet.join("robot_0", footprint_area_size=0, known_robots=["robot_0", "robot_1"])

@@ -78,3 +78,37 @@ def test_an_internal_update_that_grows_a_rectangle_next_to_another_merges_them()
     assert r.handler.get(survivor).rectangle == rect(0, 0, 4, 1)
     assert r.handler.counters["merged_obstacles"] == 1
 
+
+
+# Merging across a bucket edge: the index keeps rectangles in 4 m buckets (x = 4.0 is an edge), so
+# two obstacles just either side of it are in different buckets and only a query widened by
+# merge_distance finds the neighbour. merge_distance 0.5: a gap of 0.45 m merges, 0.55 m does not.
+EDGE = 4.0
+
+
+def _either_side(gap):
+    """Two 0.45 m squares, the west one ending and the east one starting `gap`/2 from x = 4.0."""
+    west = rect(EDGE - gap / 2 - 0.45, 1.0, EDGE - gap / 2, 1.45)
+    east = rect(EDGE + gap / 2, 1.0, EDGE + gap / 2 + 0.45, 1.45)
+    return west, east
+
+
+def test_a_proposal_across_a_bucket_edge_merges_just_inside_merge_distance_only():
+    for gap, merged in ((0.45, True), (0.55, False)):
+        r = Recorder(merge_distance=0.5)
+        west, east = _either_side(gap)
+        held = r.handler.on_proposal(proposal(cells=cells_in(west), rectangle=west))
+        sent = r.handler.on_proposal(proposal(cells=cells_in(east), rectangle=east))
+        assert (sent.uuid == held.uuid) is merged, "gap %.2f m, merge_distance 0.5 m" % gap
+        assert len(r.handler) == (1 if merged else 2), "gap %.2f m" % gap
+
+
+def test_held_obstacles_across_a_bucket_edge_merge_just_inside_merge_distance_only():
+    for gap, merged in ((0.45, True), (0.55, False)):
+        r = Recorder(merge_distance=0.5)
+        west, east = _either_side(gap)
+        for name, rectangle in (("west", west), ("east", east)):
+            assert r.handler.on_external(update(U(name), marked=cells_in(rectangle), version=1,
+                                                source="robot_1", rectangle=rectangle)) is True
+        assert len(r.handler) == (1 if merged else 2), "gap %.2f m, merge_distance 0.5 m" % gap
+        assert r.handler.counters["merged_obstacles"] == (1 if merged else 0)

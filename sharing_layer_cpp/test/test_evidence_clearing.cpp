@@ -333,3 +333,50 @@ TEST(EvidenceClearing, BadParametersAreRejectedByName)
   p.inscribed_radius = -0.1;
   EXPECT_THROW(SharingCore(grid(), p), std::invalid_argument);
 }
+
+namespace
+{
+/// A shared one-column obstacle (cells x = 100, y = 98..102: 5.00..5.05 m by 4.90..5.15 m) seen from (3.6, 5.0) through
+/// three scans over 1 s. The world holds no block there, only a wall whose face lies `gap` metres beyond the column's far
+/// edge (5.05 m): every beam through the column ends `gap` + 0.05 m beyond the column's near side (x = 5.00).
+/// @return how many of the column's 5 cells the scans cleared
+std::size_t clearedBeforeAWall(const LayerParams& p, double gap)
+{
+  SimWorld world = walledWorld();
+  world.box(5.05 + gap, 4.0, 6.0, 6.0);
+  SharingCore core = makeCore(p);
+  const GridGeometry g = grid();
+  std::vector<std::uint32_t> column;
+  for (unsigned int y = 98; y <= 102; ++y)
+  {
+    column.push_back(g.getIndex(100, y));
+  }
+  EXPECT_TRUE(core.applyShared(sharedUpdate("column", column, Subsection(5.0, 4.9, 5.05, 5.15)), 1.0).ok);
+  const Observation scan = world.scan(3.6, 5.0, 0.0);
+  std::size_t cleared = 0;
+  for (double t : { 2.0, 2.5, 3.0 })
+  {
+    for (const ObstacleUpdate& u : core.processScan(scan, t).updates)
+    {
+      cleared += u.cleared.size();
+    }
+  }
+  return cleared;
+}
+}  // namespace
+
+TEST(EvidenceClearing, TheMarginFromLayerParamsDecidesJustInsideAndJustOutside)
+{
+  // A beam is evidence for a cell only when it ends at least clearing_margin beyond where it entered it (the column's
+  // near side, x = 5.00): ending 0.01 m short of the margin keeps the cells, 0.01 m past it clears them. With the
+  // default 0.1 m and with 0.2 m, so that it is the parameter, through the scan pass, that decides.
+  for (double margin : { 0.1, 0.2 })
+  {
+    LayerParams p = defaults();
+    p.clearing_margin = margin;
+    ASSERT_EQ(8u, p.clearing_neighbours);  // the other guards as shipped: they hold nothing back here
+    const double near_side_to_end_inside = margin - 0.01, near_side_to_end_outside = margin + 0.01;
+    EXPECT_EQ(0u, clearedBeforeAWall(p, near_side_to_end_inside - 0.05)) << "margin " << margin;
+    EXPECT_EQ(5u, clearedBeforeAWall(p, near_side_to_end_outside - 0.05)) << "margin " << margin;
+  }
+}

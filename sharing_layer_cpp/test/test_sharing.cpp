@@ -313,6 +313,20 @@ TEST(Overlay, DrawingInAWindowWritesNothingOutsideIt)
   EXPECT_EQ(static_cast<long>(master.size() - 7), std::count(master.begin(), master.end(), 7));
 }
 
+TEST(Overlay, TheWindowsRightAndTopEdgesAreExclusive)
+{
+  // [10, 20) x [10, 20): column 19 and row 19 are the last inside, column 20 and row 20 the first outside.
+  SharingCore core(grid40(), params());
+  ASSERT_TRUE(core.applyShared(share("right", { cell(19, 15), cell(20, 15) }, Subsection(1.9, 1.5, 2.1, 1.6)), 0.0).ok);
+  ASSERT_TRUE(core.applyShared(share("top", { cell(15, 19), cell(15, 20) }, Subsection(1.5, 1.9, 1.6, 2.1)), 0.0).ok);
+  std::vector<std::uint8_t> master(grid40().cellCount(), 7);
+  core.drawShared(master.data(), master.size(), 10, 10, 20, 20);
+  EXPECT_EQ(LETHAL_OBSTACLE, master[cell(19, 15)]);
+  EXPECT_EQ(7, master[cell(20, 15)]) << "column max_i is outside the window";
+  EXPECT_EQ(LETHAL_OBSTACLE, master[cell(15, 19)]);
+  EXPECT_EQ(7, master[cell(15, 20)]) << "row max_j is outside the window";
+}
+
 TEST(Overlay, ClearOutsideAWindowKeepsTheWindowAndSharedObstacles)
 {
   // move_base's conservative reset around a robot at cell (20, 20): marks near it stay, far marks go.

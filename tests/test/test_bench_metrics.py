@@ -304,3 +304,18 @@ def test_layout_all_writes_one_table_per_layout_and_summarize_reads_them_back(tm
     assert "layout facility" in facility and "layout corridors" in corridors
     out = capsys.readouterr().out
     assert out.index("## facility world") < out.index("## corridors world")
+
+
+def test_the_latency_cell_states_n_and_says_why_below_30():
+    bf = load_bench_fleet()
+    r = {"latency_ms": [1.0] * 28, "latency_missed": 2, "latency_ms_p50": 1.0, "latency_ms_p99": math.inf}
+    assert bf.latency_cell(r) == "1.0 / inf (n = 30, 2 lost)"
+    r["latency_missed"] = 1
+    assert bf.latency_cell(r).startswith("1.0 / inf (n = 29 < 30: only 29 obstacle x peer pairs")
+
+
+def test_a_pair_that_never_arrived_makes_the_p99_infinite_not_smaller():
+    from fleet_tests.scenario import percentile
+    assert percentile([1.0] * 99 + [math.inf], 50) == 1.0
+    assert math.isinf(percentile([1.0] * 98 + [math.inf] * 2, 99))
+    assert math.isinf(percentile([math.inf], 99))

@@ -113,3 +113,22 @@ def test_a_face_reaching_into_door_jambs_counts_only_where_it_can_be_shared():
     corridor_only = run_figures(messages, tracks, {"block_far": block}, corridors, margin)["recall"]["block_far"]
     assert with_walls == 1.0
     assert corridor_only < 0.9
+
+
+def test_the_on_block_tolerance_is_pinned_in_metres():
+    """Precision rests on this tolerance: 0.0636 m (half a 5 cm cell's diagonal plus one 2 cm raster cell's) off the
+    face counts, 0.0645 m does not. Written out, so that loosening either constant turns this red."""
+    assert SIMULATOR_RASTER == 0.02
+    assert on_block(12.9, 5.85 - 0.0630, RES, BLOCK)
+    assert not on_block(12.9, 5.85 - 0.0645, RES, BLOCK)
+    assert on_block(12.9, 6.15 + 0.0630, RES, BLOCK) and not on_block(12.9, 6.15 + 0.0645, RES, BLOCK)
+    assert on_block(14.3 + 0.0630, 6.0, RES, BLOCK) and not on_block(14.3 + 0.0645, 6.0, RES, BLOCK)
+
+
+def test_face_recall_reaches_one_cell_in_front_of_the_face_and_no_further():
+    """Recall rests on this reach: a row of cells centred 0.049 m in front of the face (the cell before it) covers
+    the face, one 0.051 m in front does not; inside the block the same."""
+    free = lambda x, _y: 11.8 < x < 14.0     # noqa: E731
+    for offset, covered in ((-0.049, 1.0), (-0.051, 0.0), (0.049, 1.0), (0.051, 0.0)):
+        recall, _missed = face_recall(face_cells(y=5.85 + offset), RES, BLOCK, (13.6, 3.0), free=free)
+        assert recall == covered, "cells %+.3f m from the face" % offset

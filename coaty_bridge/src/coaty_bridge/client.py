@@ -126,7 +126,6 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
             (subscription(ns, "ADV::" + config.object_type), qos),
             (subscription(ns, "ADV::" + config.footprint_object_type), qos),
             (subscription(ns, "DSC", two_way=True), qos),
-            (subscription(ns, "RSV", two_way=True), qos),
             (subscription(ns, "CHN:" + HEARTBEAT_CHANNEL), qos),
             (subscription(ns, "CHN:" + renewals.CHANNEL), qos),
             (subscription(ns, "DAD"), qos),

@@ -5,7 +5,7 @@ import dataclasses
 import logging
 
 from coaty_bridge import codec, lifetimes
-from coaty_bridge.topics import Topic, new_uuid
+from coaty_bridge.topics import Topic, new_uuid, resolve_subscription
 
 LOG = logging.getLogger("coaty_bridge.client")
 
@@ -47,10 +47,19 @@ class DiscoveryMixin:
     def _discover_obstacles(self, object_types=None):
         correlation_id = new_uuid()
         now = self._clock()
+        ns = self.config.namespace
         with self._lock:
             window = self.config.discover_window
+            ended = [c for c, t in self._pending_discovers.items() if not now - t < window]
             self._pending_discovers = {c: t for c, t in self._pending_discovers.items() if now - t < window}
             self._pending_discovers[correlation_id] = now
+            # Only the Resolves to this Discover, subscribed before it goes out (the broker takes one connection's
+            # packets in order), and no longer those of Discovers whose window has ended. With every Resolve of
+            # the namespace, each robot received every catch-up of every driving robot entering new areas
+            # (4.3 MB per robot per minute in the fleet_scale bench, half of 100 robots driving).
+            self._mqtt.subscribe(resolve_subscription(ns, correlation_id), self._qos)
+            if ended:
+                self._mqtt.unsubscribe([resolve_subscription(ns, c) for c in ended])
         topic = Topic(self.config.namespace, "DSC", self.identity_id, correlation_id=correlation_id)
         self._send(str(topic), codec.discover_object_types_payload(object_types or [self.config.object_type]),
                    queue=False)

@@ -53,6 +53,8 @@ MAX_TEXT = 256
 MAX_VALID_FOR = 600.0
 #: A parked robot's advert is valid for this many of its advert intervals (one lost advert is no gap).
 PARKED_VALIDITY = 2.5
+#: s between a far driving robot's adverts when it moves less than far_move (AdvertSchedule)
+FAR_INTERVAL = 10.0
 #: Longest sensor reach an advert may state, m (a receiver caps it further: max_sensor_reach).
 MAX_REACH = 1000.0
 #: footprint_area_size bounds, m (0 is allowed too: no areas).
@@ -268,6 +270,15 @@ class FleetRobotTable:
         return [robots[name] for name in sorted(robots)]
 
 
+def near_any(own_points, peers, distance):
+    """Whether a peer footprint (``peers``: point lists) has its centroid within ``distance`` m of this robot's
+    (AdvertSchedule's near/far). ``distance`` <= 0: always near (every advert precise)."""
+    if distance <= 0:
+        return True
+    x, y = centroid(own_points)
+    return any(math.hypot(px - x, py - y) <= distance for px, py in (centroid(p) for p in peers))
+
+
 def largest_move(a, b):
     """How far (m) the farthest-moving vertex went from footprint ``a`` to ``b`` (inf when their
     vertex counts differ): a turn on the spot moves the corners, not the centroid."""
@@ -284,39 +295,63 @@ class AdvertSchedule:
     - parked, every ``parked_interval`` s, each advert valid for PARKED_VALIDITY times that, so the
       peers keep the robot between them (``validFor`` on the wire; older receivers use their own
       robot_timeout, and forget a parked robot between adverts).
-    ``parked_interval`` 0 (or ``min_move`` 0: motion is not watched) keeps the rate at all times.
+    - far (the caller passes ``near=False``: no known peer within its near distance), driving: at once only
+      when a vertex moved ``far_move``, and otherwise every FAR_INTERVAL s, each advert valid for
+      PARKED_VALIDITY times that. No peer's sensors reach the robot, so no peer needs its pose within
+      ``min_move``; the first footprint that is near again sends at once (it moved ``min_move`` since).
+    ``parked_interval`` 0 (or ``min_move`` 0: motion is not watched) keeps the rate at all times;
+    ``far_move`` 0 makes every robot near.
     Pure: the caller passes the time and sends what it is told; ``sent`` records it."""
 
-    def __init__(self, rate, min_move, parked_interval, parked_after=2.0):
+    def __init__(self, rate, min_move, parked_interval, parked_after=2.0, far_move=0.0):
         self.rate, self.min_move = float(rate), float(min_move)
         self.parked_interval, self.parked_after = float(parked_interval), float(parked_after)
+        self.far_move = float(far_move)
         self._last_points = None
         self._last_time = None
         self._last_valid_for = 0.0
         self._last_motion = -math.inf
+        self._motion_ref = None   # the footprint where motion was last seen (adverts or not: far ones are rare)
 
-    def on_footprint(self, points, now):
+    def _far(self, near):
+        return not near and self.far_move > 0 and self.min_move > 0
+
+    def _watch_motion(self, points, now):
+        if self.min_move > 0 and self._motion_ref is not None \
+                and largest_move(self._motion_ref, points) >= self.min_move:
+            self._last_motion, self._motion_ref = now, tuple(points)
+
+    def on_footprint(self, points, now, near=True):
         """A new own footprint: the validFor of an advert to send now (a motion advert), or None."""
+        self._watch_motion(points, now)
         if self.min_move <= 0 or self._last_points is None:
+            return None
+        if self._far(near):
+            if largest_move(self._last_points, points) >= self.far_move:
+                return PARKED_VALIDITY * FAR_INTERVAL
             return None
         if largest_move(self._last_points, points) >= self.min_move:
             self._last_motion = now
             return 0.0
         return None
 
-    def on_tick(self, points, now):
+    def on_tick(self, points, now, near=True):
         """The ``rate`` tick: the validFor of an advert to send now, or None to skip this tick."""
-        if self._last_time is None or largest_move(self._last_points, points) >= max(self.min_move, 1e-9):
+        self._watch_motion(points, now)
+        far = self._far(near)
+        if self._last_time is None or largest_move(self._last_points, points) >= max(
+                self.far_move if far else self.min_move, 1e-9):
             if self._last_points is not None and self.min_move > 0:
                 self._last_motion = now
-            return 0.0
+            return PARKED_VALIDITY * FAR_INTERVAL if far and self._last_time is not None else 0.0
         since = now - self._last_time
         parked = self.parked_interval > 0 and self.min_move > 0 and now - self._last_motion >= self.parked_after
-        if not parked:
+        if not parked and not far:
             # skipped when a motion advert went out since the previous tick
             return 0.0 if not 0.0 <= since < 0.75 / self.rate else None
-        if self._last_valid_for <= 0 or not 0.0 <= since < self.parked_interval:
-            return PARKED_VALIDITY * self.parked_interval
+        interval = self.parked_interval if parked else FAR_INTERVAL
+        if self._last_valid_for <= 0 or not 0.0 <= since < interval:
+            return PARKED_VALIDITY * interval
         return None
 
     @property
@@ -326,3 +361,5 @@ class AdvertSchedule:
 
     def sent(self, points, now, valid_for):
         self._last_points, self._last_time, self._last_valid_for = tuple(points), now, valid_for
+        if self._motion_ref is None:
+            self._motion_ref = tuple(points)

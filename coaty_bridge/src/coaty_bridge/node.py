@@ -28,7 +28,7 @@ from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.security import read_password_file
-from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotTable, MAX_VALID_FOR,
+from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotTable, MAX_VALID_FOR, near_any,
                                     RobotFootprint as FootprintValue, centroid)
 
 LOG = logging.getLogger(__name__)
@@ -111,13 +111,15 @@ class FootprintConfig:
     """The node's footprint parameters (fleet robots are never shared); ValueError names a bad one."""
 
     def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True,
-                 min_move=0.1, parked_interval=30.0):
+                 min_move=0.1, parked_interval=30.0, near_distance=5.0, far_move=1.0):
         if not isinstance(topic, str) or not topic:
             raise ValueError("parameter footprint_topic = %r: must be a topic name" % (topic,))
         for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0),
                                        ("footprint_min_move", min_move, 0.0, 10.0),
                                        ("footprint_parked_interval", parked_interval, 0.0,
-                                        MAX_VALID_FOR / PARKED_VALIDITY)):
+                                        MAX_VALID_FOR / PARKED_VALIDITY),
+                                       ("footprint_near_distance", near_distance, 0.0, 100.0),
+                                       ("footprint_far_move", far_move, 0.0, 10.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
                 raise ValueError("parameter %s = %r: must be %g..%g" % (name, value, low, high))
         if not isinstance(advertise, bool):
@@ -126,11 +128,16 @@ class FootprintConfig:
             raise ValueError("parameter robot_timeout = %r: shorter than two adverts at footprint_rate %r Hz; a "
                              "robot would be forgotten between adverts" % (robot_timeout, rate))
         self.topic, self.rate, self.robot_timeout, self.advertise = topic, float(rate), float(robot_timeout), advertise
+        if near_distance > 0 and not min_move <= far_move:
+            raise ValueError("parameter footprint_far_move = %r: must be at least footprint_min_move %r (or "
+                             "footprint_near_distance 0)" % (far_move, min_move))
         self.min_move = float(min_move)
         self.parked_interval = float(parked_interval)
+        self.near_distance, self.far_move = float(near_distance), float(far_move)
 
     def schedule(self):
-        return AdvertSchedule(self.rate, self.min_move, self.parked_interval)
+        return AdvertSchedule(self.rate, self.min_move, self.parked_interval,
+                              far_move=self.far_move if self.near_distance > 0 else 0.0)
 
     @classmethod
     def from_params(cls):
@@ -139,7 +146,9 @@ class FootprintConfig:
                    robot_timeout=rospy.get_param("~robot_timeout", 3.0),
                    advertise=rospy.get_param("~advertise_footprint", True),
                    min_move=rospy.get_param("~footprint_min_move", 0.1),
-                   parked_interval=rospy.get_param("~footprint_parked_interval", 30.0))
+                   parked_interval=rospy.get_param("~footprint_parked_interval", 30.0),
+                   near_distance=rospy.get_param("~footprint_near_distance", 5.0),
+                   far_move=rospy.get_param("~footprint_far_move", 1.0))
 
 
 def polygon_to_footprint(msg, robot, now):
@@ -346,10 +355,15 @@ class BridgeNode:
         # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
         # at most min_move (plus transport), not by a whole heartbeat period of driving.
         if self.footprint_config.advertise:
+            near = self._near(footprint.points)
             with self._lock:
-                valid_for = self._adverts.on_footprint(footprint.points, now)
+                valid_for = self._adverts.on_footprint(footprint.points, now, near)
             if valid_for is not None:
                 self._advertise(footprint, now, valid_for)
+
+    def _near(self, points):
+        """Whether a known fleet robot is within footprint_near_distance (else this robot's adverts are far ones)."""
+        return near_any(points, [r.footprint.points for r in self.fleet.robots()], self.footprint_config.near_distance)
 
     def _advertise(self, footprint, now, valid_for):
         footprint = dataclasses.replace(footprint, valid_for=valid_for)
@@ -396,8 +410,9 @@ class BridgeNode:
             age = now - own[1]
             if 0.0 <= age <= self.footprint_config.robot_timeout:
                 # The heartbeat: at the rate while moving, rarely while parked (AdvertSchedule).
+                near = self._near(own[0].points)
                 with self._lock:
-                    valid_for = self._adverts.on_tick(own[0].points, now)
+                    valid_for = self._adverts.on_tick(own[0].points, now, near)
                 if valid_for is not None:
                     self._advertise(own[0], now, valid_for)
                 self._stale_logged = False

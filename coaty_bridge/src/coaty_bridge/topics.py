@@ -126,6 +126,14 @@ def parse_topic(text):
                  object_type=object_type, filter=filt)
 
 
+def resolve_subscription(namespace, correlation_id):
+    """The Resolves to one of our Discovers only (any sender, any protocol version), as a Coaty agent subscribes:
+    a wildcard on the correlation id brought every robot every Resolve of the fleet."""
+    check_name(namespace, "namespace")
+    check_name(correlation_id, "correlation id")
+    return "%s/+/%s/RSV/+/%s" % (PROTOCOL_NAME, namespace, correlation_id)
+
+
 def subscription(namespace, event_level, two_way=False):
     """The MQTT subscription filter for one event level of any protocol version and any
     sender (the version is a wildcard so that other versions are counted, not unseen)."""

@@ -382,6 +382,9 @@ class Fleet:
         receiving it authorised (peer costmap), one value per (obstacle, peer). The proposal is the
         one with the obstacle's rectangle (authorisation keeps it)."""
         out = []
+        # (obstacle, peer) pairs whose obstacle never reached that peer's layer under its uuid (lost, or merged
+        # there into another): the bench counts them as lost in its percentiles
+        self.latency_pairs_missed = 0
         with self.lock:
             for r in self.robots:
                 for _ts, share in [(t, m) for t, m in r.to_fleet if m.version == 1 and m.source == r.name]:
@@ -391,6 +394,7 @@ class Fleet:
                             continue
                         got = [t for t, m in peer.layer_in_wall if m.uuid == share.uuid]
                         if not got:
+                            self.latency_pairs_missed += 1
                             continue
                         proposed = [t for t, p in r.proposals_wall if tuple(p.rectangle_shape) == rect and t <= got[0]]
                         if proposed:
@@ -540,6 +544,8 @@ def percentile(values, q):
     values = sorted(values)
     k = (len(values) - 1) * q / 100.0
     lo, hi = int(math.floor(k)), int(math.ceil(k))
+    if lo == hi or values[hi] == values[lo]:
+        return values[lo]   # also an infinite one (a lost sample) without inf - inf
     return values[lo] + (values[hi] - values[lo]) * (k - lo)
 
 
