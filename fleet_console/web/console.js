@@ -178,20 +178,22 @@ function ackAction(body) {
 
 // An operator's update outranks what robots send meanwhile: the robots keep monitoring the obstacle, and an
 // update of theirs in flight with the same version would win the tie (its source sorts after most names).
-// Robots' later updates take a version above it, as they would after any update they hear.
-const VERSION_MARGIN = 100;
+// Robots' later updates take a version above it, as they would after any update they hear. The margin is the
+// rules of authority's OPERATOR_VERSION_MARGIN (sharing_msgs.authority), which the server gives in /config.json;
+// every handler's max_version_step is at least twice it, so no robot refuses the jump as implausible.
+const versionMargin = () => C.config.versionMargin;
 C.remove = uuid => {
   const e = C.model.obstacles.get(uuid);
   if (!e || e.present === 0) return null;
   // every cell ever heard of, not only those present here: a robot may still hold one this page saw cleared
   const cells = Array.from(e.cells.keys()).sort((a, b) => a - b);
-  return act("remove", obstacleObject(e, e.maxVersion + VERSION_MARGIN, [], cells, (e.expiresAt - Date.now()) / 1000));
+  return act("remove", obstacleObject(e, e.maxVersion + versionMargin(), [], cells, (e.expiresAt - Date.now()) / 1000));
 };
 C.confirm = uuid => {
   const e = C.model.obstacles.get(uuid);
   if (!e || e.present === 0) return null;
   const present = Array.from(e.cells).filter(([, c]) => c.on).map(([i]) => i).sort((a, b) => a - b);
-  return act("confirm", obstacleObject(e, e.maxVersion + VERSION_MARGIN, present, [], C.config.obstacleDuration));
+  return act("confirm", obstacleObject(e, e.maxVersion + versionMargin(), present, [], C.config.obstacleDuration));
 };
 C.add = rect => {
   const g = C.config.map ? { resolution: C.config.map.resolution, origin: C.config.map.origin,

@@ -25,6 +25,7 @@ import websockets.legacy.server
 from coaty_bridge.identity import identity_for
 from coaty_bridge.security import read_password_file
 from coaty_bridge.topics import check_name
+from sharing_msgs.authority import OPERATOR_VERSION_MARGIN
 
 LOG = logging.getLogger(__name__)
 WEB_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "web")
@@ -142,6 +143,7 @@ class ConsoleServer:
         if path == "/config.json":
             return self._json({"namespace": self.namespace, "objectType": self.object_type, "wsPath": "/mqtt",
                                "obstacleDuration": self.obstacle_duration, "title": self.title,
+                               "versionMargin": OPERATOR_VERSION_MARGIN,
                                "map": dict(console_map.meta(), version=map_version) if console_map else None,
                                "mapError": map_error})
         if path == "/map.png":
