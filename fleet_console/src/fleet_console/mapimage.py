@@ -81,9 +81,14 @@ def from_yaml(path):
     image_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(spec["image"]))
     try:
         with Image.open(image_path) as image:
+            if image.width * image.height > MAX_CELLS:   # before decoding: a header may claim any size
+                raise MapError("%s: image %s is %d x %d pixels, more than %d cells"
+                               % (what, spec["image"], image.width, image.height, MAX_CELLS))
             image.load()
             grey = image.convert("L")
-    except (OSError, ValueError) as err:
+    except (OSError, ValueError, Image.DecompressionBombError) as err:
+        if isinstance(err, MapError):
+            raise
         raise MapError("%s: image %s cannot be read: %s" % (what, spec["image"], err)) from None
     _check_geometry(spec["resolution"], origin[0], origin[1], grey.width, grey.height, what)
     return ConsoleMap(_png(grey), float(spec["resolution"]), float(origin[0]), float(origin[1]), grey.width,

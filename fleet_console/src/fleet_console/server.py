@@ -169,6 +169,10 @@ class ConsoleServer:
         """operator, viewer, or "" when the console does not know (another credentials folder)."""
         if not self.credentials_dir:
             return ""
+        try:
+            check_name(name, "login name")   # no '/': "../broker" must not reach the broker's own secret
+        except ValueError:
+            return ""
         for folder, role in (("operators", "operator"), ("viewers", "viewer")):
             if os.path.exists(os.path.join(self.credentials_dir, folder, name + ".password")):
                 return role
