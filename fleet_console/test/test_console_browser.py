@@ -58,6 +58,7 @@ class FleetWatch:
         self.lock = threading.Lock()
         self.lists = {r: [] for r in ROBOTS}      # (time, {uuid})
         self.costmaps = {r: [] for r in ROBOTS}   # (time, [(x, y)])
+        self.entries = {r: {} for r in ROBOTS}    # uuid -> (source, version, deadline left) in the latest list
         for robot in ROBOTS:
             rospy.Subscriber("/%s/shared_obstacle_list" % robot, SharedObstacleArray,
                              lambda m, r=robot: self._list(r, m), queue_size=50)
@@ -67,6 +68,7 @@ class FleetWatch:
     def _list(self, robot, msg):
         with self.lock:
             self.lists[robot].append((time.time(), {o.uuid for o in msg.obstacles}))
+            self.entries[robot] = {o.uuid: (o.source, o.version, o.deadline) for o in msg.obstacles}
 
     def _costmap(self, robot, msg):
         points = [(p.x, p.y) for m in msg.markers for p in m.points]
@@ -139,6 +141,9 @@ def _has_param(name):
         return False
 
 
+USED = []   # the squares the tests put obstacles on: a later one lies apart (beyond merge_distance)
+
+
 def wall_square(grid, robot, reach=3.5, side=0.2):
     """A square of wall (occupied on the map) within reach of the robot. An obstacle shared there stays until its
     lease or an operator ends it: no beam passes through a wall to clear it, and no robot marks static cells
@@ -155,11 +160,15 @@ def wall_square(grid, robot, reach=3.5, side=0.2):
             cx, cy = int((x0 - ox) / res), int((y0 - oy) / res)
             if 0 <= cx < w - n and 0 <= cy < h - n and occ[cy:cy + n, cx:cx + n].min() > 50:
                 x, y = ox + cx * res, oy + cy * res
-                return [x + 0.01, y + 0.01, x + n * res - 0.01, y + n * res - 0.01]
+                if any(x < u[2] + 0.8 and u[0] - 0.8 < x + n * res and y < u[3] + 0.8 and u[1] - 0.8 < y + n * res
+                       for u in USED):
+                    continue
+                USED.append([x + 0.01, y + 0.01, x + n * res - 0.01, y + n * res - 0.01])
+                return USED[-1]
     raise AssertionError("no wall within %g m of %s" % (reach, robot))
 
 
-def share_hidden(robot):
+def share_hidden(robot, deadline=0):
     """robot shares an obstacle by hand on a wall (within its sensor reach: the peers' evidence rule)."""
     import rospy
     from nav_msgs.msg import OccupancyGrid, Odometry
@@ -169,7 +178,7 @@ def share_hidden(robot):
     rospy.wait_for_service("/%s/add_obstacle" % robot, timeout=30)
     before = time.time()
     reply = rospy.ServiceProxy("/%s/add_obstacle" % robot, AddObstacle)(rectangle_shape=rect, marked_indexes=[],
-                                                                          deadline=0)
+                                                                          deadline=deadline)
     assert reply.success, reply.message
     return reply.uuid, rect, before
 
@@ -273,3 +282,84 @@ def _publish_garbage(fleet, secret):
         client.publish(topic, payload).wait_for_publish(5)
     client.loop_stop()
     client.disconnect()
+
+
+def _entry(watch, robot, uuid):
+    with watch.lock:
+        return watch.entries[robot].get(uuid)
+
+
+def _login(page, name, secret):
+    page.login(name, secret)
+    page.wait(lambda: page.js("return window.fleetConsole.connected && window.fleetConsole.name === '%s'" % name),
+              name + "'s login", timeout=30)
+
+
+def _action_status(page):
+    return page.js("return document.getElementById('action-status').textContent")
+
+
+def test_operators_confirm_and_add_every_robot_takes_them_a_viewer_cannot(fleet):
+    """Confirm renews the lease on every robot (a share with a 60 s lease gets the console's 1200 s) at the version
+    the page sent; Add from the page's form is listed on every robot with the operator as its source; both logged
+    with the operator's name on every robot. A viewer's confirm and add are refused by the broker: no robot's list
+    changes."""
+    import rospy
+    from nav_msgs.msg import Odometry, OccupancyGrid
+    watch, secrets = fleet["watch"], fleet["secrets"]
+    uuid, _rect, _ = share_hidden("robot_0", deadline=60)
+    wait_until(lambda: all(_entry(watch, r, uuid) for r in ROBOTS), "both robots holding " + uuid, 20)
+    before = {r: _entry(watch, r, uuid) for r in ROBOTS}
+    assert all(e[2] <= 60 for e in before.values()), before
+    p = rospy.wait_for_message("/robot_1/base_pose_ground_truth", Odometry, timeout=30).pose.pose.position
+    add_rect = wall_square(rospy.wait_for_message("/map", OccupancyGrid, timeout=30), (p.x, p.y))
+    page = ConsolePage(fleet["url"])
+    try:
+        # a viewer: both buttons disabled, and a confirm and an add sent anyway are refused, changing nothing
+        _login(page, "olga", secrets["olga"])
+        page.wait(lambda: uuid in page.listed(), "the obstacle on olga's page", timeout=20)
+        assert page.js("return document.querySelector('#ob-%s button.confirm').disabled" % uuid)
+        assert page.js("return document.getElementById('add-btn').disabled")
+        assert page.js("return !!window.fleetConsole.confirm(arguments[0])", uuid)
+        page.wait(lambda: "confirm" in _action_status(page) and "refused" in _action_status(page),
+                  "olga's confirm refused on the page", timeout=10)
+        assert page.js("return !!window.fleetConsole.add(arguments[0])", add_rect)
+        page.wait(lambda: "add" in _action_status(page) and "refused" in _action_status(page),
+                  "olga's add refused on the page", timeout=10)
+        time.sleep(1.5)
+        for robot in ROBOTS:
+            assert _entry(watch, robot, uuid)[1] == before[robot][1], robot + " took olga's confirm"
+            with watch.lock:
+                sources = {e[0] for e in watch.entries[robot].values()}
+            assert "olga" not in sources, robot + " took olga's add"
+
+        # the operator confirms: every robot renews it at the page's version, and logs anna
+        _login(page, "anna", secrets["anna"])
+        page.wait(lambda: uuid in page.listed(), "the obstacle on anna's page", timeout=20)
+        page.js("document.querySelector('#ob-%s button.confirm').click()" % uuid)
+        sent = page.wait(lambda: page.js("const a = window.fleetConsole.actions.filter(a => a.kind === 'confirm' && "
+                                         "a.acked); return a.length ? a[a.length - 1] : null"),
+                         "the broker taking anna's confirm", timeout=10)
+        assert sent["version"] >= before["robot_0"][1] + page.js("return window.fleetConsole.config.versionMargin")
+        for robot in ROBOTS:
+            renewed = wait_until(lambda r=robot: (_entry(watch, r, uuid) or (0, 0, 0))[1] == sent["version"]
+                                 and _entry(watch, r, uuid), robot + " taking anna's confirm", 20)
+            assert renewed[2] > 600, "%s's lease after the confirm: %s s" % (robot, renewed[2])
+        wait_until(lambda: robot_logs(fleet["home"], "operator anna confirmed obstacle " + uuid) >= set(ROBOTS),
+                   "the confirm attributed to anna in every robot's log", 20)
+
+        # the operator adds one, as an operator would: the form on the page
+        for field, value in zip(("add-minx", "add-miny", "add-maxx", "add-maxy"), add_rect):
+            page.js("document.getElementById(arguments[0]).value = arguments[1]", field, str(value))
+        page.js("document.getElementById('add-btn').click()")
+        added = page.wait(lambda: page.js("const a = window.fleetConsole.actions.filter(a => a.kind === 'add' && "
+                                          "a.acked); return a.length ? a[a.length - 1].uuid : null"),
+                          "the broker taking anna's add", timeout=10)
+        for robot in ROBOTS:
+            entry = wait_until(lambda r=robot: _entry(watch, r, added), robot + " listing anna's obstacle", 20)
+            assert entry[0] == "anna", "%s lists the added obstacle as %s's" % (robot, entry[0])
+        wait_until(lambda: robot_logs(fleet["home"], "operator anna added obstacle " + added) >= set(ROBOTS),
+                   "the add attributed to anna in every robot's log", 20)
+        page.wait(lambda: added in page.listed(), "anna's obstacle on the page", timeout=10)
+    finally:
+        page.close()

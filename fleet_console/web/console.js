@@ -72,6 +72,7 @@ async function login(name, password) {
   client.on("error", err => {
     if (err && (err.code === 4 || err.code === 5)) {
       setStatus("Login refused by the fleet's broker: wrong name or password for '" + name + "' (" + err.message + ")", "error");
+      client.refused = true;
       client.end(true);
     } else {
       setStatus("Broker connection problem: " + (err && err.message ? err.message : err), "error");
@@ -79,6 +80,8 @@ async function login(name, password) {
   });
   client.on("close", () => {
     if (C.connected) setStatus("Connection to the fleet's broker lost; reconnecting ...", "error");
+    else if (!client.refused && C.client === client)
+      setStatus("The fleet's broker cannot be reached through the console (" + url + "); retrying every 2 s ...", "error");
     C.connected = false;
   });
 }
