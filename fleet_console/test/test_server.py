@@ -316,3 +316,23 @@ def test_the_console_with_a_bad_map_file_runs_and_says_why(tmp_path, kind):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_the_readmes_parameter_table_gives_every_parameter_and_its_default():
+    """fleet_console/README.md's table: each row's names (`~a` / `~b` or `~a`, `~b`) and defaults, in that order,
+    are the node's DEFAULTS (credentials_dir "" means $ROS_HOME/fleet_security; broker_wait is named in a row)."""
+    import os
+    import re
+    readme = open(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "README.md")).read()
+    documented = {}
+    for names, defaults in re.findall(r"^\| ((?:`~\w+`(?:, | / )?)+) \| ([^|]+) \|", readme, flags=re.M):
+        names = re.findall(r"`~(\w+)`", names)
+        values = [v.strip().strip("`") for v in re.split(r", | / ", defaults.strip())]
+        assert len(names) == len(values), (names, values)
+        documented.update(zip(names, values))
+    expected = {name: ("false" if value is False else '""' if value == "" else str(value))
+                for name, value in node.DEFAULTS.items()}
+    expected["credentials_dir"] = "$ROS_HOME/fleet_security"
+    assert "`~broker_wait` (%g s)" % node.DEFAULTS["broker_wait"] in readme
+    del expected["broker_wait"]
+    assert documented == expected
