@@ -122,3 +122,11 @@ def test_a_directory_given_as_the_map_file_is_a_map_error(tmp_path):
     with pytest.raises(MapError, match="map file"):
         mapimage.from_yaml(str(tmp_path))
 
+
+
+def test_an_image_that_cannot_be_opened_is_a_map_error(tmp_path):
+    """What root cannot read either: the image named is a folder."""
+    (tmp_path / "map.pgm").mkdir()
+    path = write_map(tmp_path, "image: map.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(MapError, match="image map.pgm cannot be read: .*Is a directory"):
+        mapimage.from_yaml(path)
