@@ -35,7 +35,7 @@ SKIP_DIRS = {"catkin_ws", "out", "test_results", "build", "devel", "install", "n
 # Python modules that come from outside ROS, by the rosdep key that installs them.
 PYTHON_LIBRARIES = {
     "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "PIL": "python3-pil",
-    "paho": "python3-paho-mqtt", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
+    "paho": "python3-paho-mqtt", "websockets": "python3-websockets", "selenium": "python3-selenium", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
     "rospkg": "python3-rospkg", "catkin_pkg": "python3-catkin-pkg", "jsonschema": "python3-jsonschema",
 }
 # ROS packages that a Python import or C++ include may name, beyond every *_msgs / *_srvs package.

@@ -101,6 +101,23 @@ def report_checks(rows, on, off, pictures, report_text, logs_text):
     return failed
 
 
+def run_console_test(out, logs):
+    """[demo 3] the fleet console's browser test (fleet_console/test), which saves its screenshot of the page."""
+    import subprocess
+    shot = os.path.join(out, "console.png")
+    if os.path.exists(shot):
+        os.remove(shot)
+    print("[demo 3] the fleet console in headless Chromium against a running fleet ...", flush=True)
+    with open(os.path.join(logs, "console_test.log"), "w") as log:
+        proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                               os.path.join(ROOT, "fleet_console", "test", "test_console_browser.py")],
+                              stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ, FLEET_CONSOLE_SHOT=shot))
+    outcome = ("passed" if os.path.exists(shot) else "skipped, no screenshot (see out/logs/console_test.log)") \
+        if proc.returncode == 0 else "FAILED (exit %d; out/logs/console_test.log)" % proc.returncode
+    print("[demo 3] fleet console test %s" % outcome, flush=True)
+    return outcome
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--layout", default="facility", choices=("facility", "deadend", "corridors"))
@@ -138,6 +155,7 @@ def main(argv=None):
         print("[demo %d/2] %s in %.0f s wall" % (
             step, "no result" if r is None else "%d/%d robots reached their goals, mean time to goal %.1f s"
             % (r["reached"], args.robots, r["time_mean"]), time.time() - started), flush=True)
+    console_png, console_outcome = os.path.join(out, "console.png"), run_console_test(out, logs)
     on, off = results[True], results[False]
     blocked = sorted({b["corridor"] for b in facility["blocks"].values()})
     pictures = {"paths": os.path.join(out, "paths.png"), "timeline": os.path.join(out, "timeline.png")}
@@ -171,6 +189,9 @@ def main(argv=None):
         report_text += "- ERROR lines upstream printed in the launch logs (not failures: see scripts/run_demo.py " \
                        "KNOWN_UPSTREAM): %s\n" % ("; ".join("%d x %s" % (n, why) for why, n in sorted(known.items()))
                                                   or "none")
+    if report_text:
+        report_text += demo_report.console_section(
+            os.path.basename(console_png) if os.path.exists(console_png) else "", console_outcome)
     failed = failed_early + report_checks(rows, on, off, pictures, report_text, logs_text)
     if failed:
         report_text += "\n## Checks that failed\n\n" + "\n".join("- " + f for f in failed) + "\n"

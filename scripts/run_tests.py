@@ -30,7 +30,7 @@ RESULTS = os.path.join(ROOT, "test_results")
 DEVEL = os.path.join(ROOT, "catkin_ws", "devel")
 # Package folders, bottom of the dependency graph first (scripts/check_package_deps.py checks it).
 PACKAGES = ["sharing_msgs", "sharing_layer_cpp", "sharing_handler_py", "coaty_bridge",
-            "fleet_sim", "fleet_nav", "sharing_replay", "vda5050_bridge", "launch", "tests"]
+            "fleet_sim", "fleet_nav", "sharing_replay", "vda5050_bridge", "fleet_console", "launch", "tests"]
 # pytest folders that are not packages: the repository's own tools.
 TOOL_TEST_FOLDERS = ["scripts", "upstream"]
 

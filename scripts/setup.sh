@@ -25,6 +25,8 @@ PACKAGES=(
   # RViz (fleet.launch rviz:=true) and, headless, its config test and make demo's screenshot:
   # a virtual X server, Mesa's software OpenGL, a font for Qt, and imagemagick's `import`
   rviz xvfb libgl1-mesa-dri fonts-dejavu-core imagemagick
+  # the fleet console: its server (WebSocket to the broker) and its test and demo screenshot in headless Chromium
+  python3-websockets chromium chromium-driver python3-selenium
 )
 
 cd "$(dirname "$0")/.."
@@ -93,4 +95,10 @@ npm_package "${FLEET_VDA_CACHE:-$HOME/.cache/fleet-vda5050-interop}" vda-5050-li
 # Upstream move_base, costmap_2d, map_server, fake_localization and Stage: from the distribution, the
 # cache, or built now from the pinned sources (upstream/README.md).
 /usr/bin/python3 upstream/build_upstream.py
+# The fleet console's browser scripts (mqtt.js, pinned in fleet_console/package-lock.json) from the npm registry,
+# served by the console itself: the page fetches nothing from the internet at run time.
+if [ ! -f fleet_console/node_modules/mqtt/dist/mqtt.min.js ]; then
+  echo "setup: installing the fleet console's browser scripts (npm ci in fleet_console)"
+  (cd fleet_console && npm ci --no-audit --no-fund --ignore-scripts)
+fi
 echo "setup: done"

@@ -114,7 +114,8 @@ def test_the_renewals_a_bridge_has_due_go_out_in_one_event(broker, make_client, 
         wait_for(lambda: {u.uuid for u in far.received_updates if u.version == 2} == {f.uuid for f in firsts},
                  what="the three renewals at the far robot")
         assert source.counters()["renewal_events_sent"] == 1
-        events = observer.on("CHN:" + renewals.CHANNEL)
+        # the observer is a client of its own: it may hear the event after the far robot does
+        events = wait_for(lambda: observer.on("CHN:" + renewals.CHANNEL), what="the renewal event at the observer")
         assert len(events) == 1 and len(events[0][1]["object"]["obstacles"]) == 3
         deadlines = sorted(u.deadline for u in far.received_updates if u.version == 2)
         assert deadlines == [20, 25, 30], "each aged by the time since its update: far copies end with the near"

@@ -34,7 +34,8 @@ for _xml in glob.glob(os.path.join(ROOT, "*", "package.xml")):
 
 DOCS = sorted(glob.glob(os.path.join(ROOT, "*.md")) + [
     p for p in glob.glob(os.path.join(ROOT, "**", "README.md"), recursive=True)
-    if os.path.dirname(p) != ROOT and not os.path.relpath(p, ROOT).startswith(("catkin_ws" + os.sep, "out" + os.sep))])
+    if os.path.dirname(p) != ROOT and not os.path.relpath(p, ROOT).startswith(("catkin_ws" + os.sep, "out" + os.sep))
+    and "node_modules" not in os.path.relpath(p, ROOT).split(os.sep)])  # npm's downloads are not our documents
 READMES = [d for d in DOCS if os.path.basename(d) == "README.md"]
 TOP = os.path.join(ROOT, "README.md")
 # Packages the READMEs may name that are not ours: upstream's, present only where they are installed.

@@ -8,6 +8,7 @@ import pytest
 from handler_fixtures import U, GRID, Recorder, cell_in, cells_in, proposal, rect, state, update
 from sharing_handler_py.errors import InvalidRequestError
 from sharing_msgs import obstacle_rules
+from sharing_msgs.authority import MIN_VERSION_STEP, OPERATOR_VERSION_MARGIN
 
 WHOLE_MAP = rect(-10, -5, 10, 5)   # GRID is 20 m x 10 m
 
@@ -59,12 +60,25 @@ def test_a_peer_obstacle_beyond_the_caps_is_dropped_counted_and_named(what, fiel
 
 
 def test_a_version_far_beyond_the_highest_seen_is_dropped_a_step_within_is_taken():
-    r = Recorder(max_version_step=100)
+    r = Recorder(max_version_step=MIN_VERSION_STEP)
     assert r.handler.on_external(update(U("a"), marked=(1,), version=5, stamp=r.clock.now))
-    assert not r.handler.on_external(update(U("a"), marked=(2,), version=106, stamp=r.clock.now))
+    assert not r.handler.on_external(update(U("a"), marked=(2,), version=5 + MIN_VERSION_STEP + 1, stamp=r.clock.now))
     assert r.handler.counters["dropped_implausible_version"] == 1
-    assert r.handler.on_external(update(U("a"), marked=(2,), version=105, stamp=r.clock.now))
-    assert r.handler.get(U("a")).version == 105
+    assert r.handler.on_external(update(U("a"), marked=(2,), version=5 + MIN_VERSION_STEP, stamp=r.clock.now))
+    assert r.handler.get(U("a")).version == 5 + MIN_VERSION_STEP
+
+
+def test_an_operators_removal_is_taken_at_the_least_step_by_a_robot_a_margin_behind_the_page():
+    """The console sends the highest version its page heard + OPERATOR_VERSION_MARGIN; a robot that missed up to
+    a margin of versions (partitioned) still takes it, at the least max_version_step a handler accepts."""
+    r = Recorder(max_version_step=MIN_VERSION_STEP)
+    assert r.handler.on_external(update(U("a"), marked=(1, 2), version=3, stamp=r.clock.now))
+    heard_by_page = 3 + OPERATOR_VERSION_MARGIN       # versions this robot never got
+    assert r.handler.on_external(update(U("a"), source="anna", marked=(), cleared=(1, 2),
+                                        version=heard_by_page + OPERATOR_VERSION_MARGIN, stamp=r.clock.now))
+    assert r.handler.counters.get("dropped_implausible_version", 0) == 0
+    held = r.handler.get(U("a"))
+    assert held is None or not held.cells, "the operator's removal left cells: %r" % (held,)
 
 
 def test_the_proposal_path_is_capped_too():
@@ -237,6 +251,8 @@ def test_a_lone_surrogate_is_refused_at_validation_with_a_clear_error(field, cap
 @pytest.mark.parametrize("changes,text", [
     (dict(max_obstacle_cells=-1), "~max_obstacle_cells = -1"),
     (dict(max_version_step=0), "~max_version_step = 0"),
+    (dict(max_version_step=MIN_VERSION_STEP - 1), "~max_version_step = %d: must be an integer >= %d"
+                                                   % (MIN_VERSION_STEP - 1, MIN_VERSION_STEP)),
     (dict(max_clock_skew=-2), "~max_clock_skew = -2"),
     (dict(max_clock_skew=float("nan")), "~max_clock_skew = nan"),
 ])

@@ -51,12 +51,27 @@ def test_every_argument_is_documented_and_layout_names_every_layout(launch):
                           env=ENV, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     listed = dict(re.findall(r"^  (\w+) \(default [^)]*\): (.*)$", proc.stdout, flags=re.M))
+    # roslaunch lists an argument whose default is "" under "Required Arguments": it is optional all the same,
+    # and its doc must say what empty means
+    blank = dict(re.findall(r"^  (\w+): (.*)$", proc.stdout.split("Optional Arguments:")[0], flags=re.M))
+    defaults = launch_defaults_of(launch)
+    for name, doc in blank.items():
+        assert defaults.get(name) == "", "%s: %s has no default (a launch must start without arguments)" % (launch, name)
+        assert "empty" in doc, "%s: %s's doc does not say what its empty default means: %s" % (launch, name, doc)
+    listed.update(blank)
     declared = {a for a in launch_args_of(launch) if not a.startswith("_")}
     assert set(listed) == declared, proc.stdout
     undocumented = sorted(name for name, doc in listed.items() if doc.strip() == "undocumented")
     assert not undocumented, "%s: arguments without doc: %s" % (launch, undocumented)
     for layout in ("facility", "deadend", "corridors"):
         assert layout in listed["layout"], listed["layout"]
+
+
+def launch_defaults_of(launch):
+    import xml.etree.ElementTree as ET
+    import rospkg
+    path = os.path.join(rospkg.RosPack().get_path("fleet_launch"), "launch", launch)
+    return {a.get("name"): a.get("default") for a in ET.parse(path).getroot().findall("arg")}
 
 
 def launch_args_of(launch):

@@ -119,6 +119,10 @@ class BridgeConfig:
     # robot names whose footprint adverts are taken; empty = any robot (see README "Fleet robot
     # footprints": with authenticate_sources, any robot with broker credentials)
     known_robots: tuple = ()
+    # operator names (fleet_console logins that may act): with authenticate_sources, an obstacle Advertise sent by
+    # such an operator's own identity (only its login may publish under it, the broker's ACL) is taken without
+    # plausible evidence: an operator has no sensors, its authority is its login
+    operators: tuple = ()
     # s: while the broker cannot be reached, a WARN at the first failed attempt and then this often
     broker_warn_interval: float = 30.0
     # where broker_url came from (which parameter), for log lines; set by the node
@@ -247,6 +251,16 @@ class BridgeConfig:
             except CoatyError as err:
                 fail("known_robots", err)
         object.__setattr__(self, "known_robots", tuple(self.known_robots))
+        if isinstance(self.operators, str):
+            object.__setattr__(self, "operators", tuple(self.operators.replace(",", " ").split()))
+        if not isinstance(self.operators, (list, tuple)):
+            fail("operators", "must be a list of operator names")
+        for name in self.operators:
+            try:
+                check_name(name, "operator")
+            except CoatyError as err:
+                fail("operators", err)
+        object.__setattr__(self, "operators", tuple(self.operators))
 
     @property
     def use_tls(self):

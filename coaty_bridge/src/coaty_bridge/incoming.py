@@ -238,7 +238,14 @@ class IncomingMixin:
                     % (update.uuid, update.version, update.source, expected, topic.source_id)),
                     str(topic), b"")
                 return
-        if self.config.require_evidence and topic.event != "RSV":
+        operator = self.config.authenticate_sources and update.source in self.config.operators
+        if operator:
+            # an operator's action (fleet_console): its login is its authority, it has no sensors to judge
+            action = ("removed" if update.cleared and not update.marked else
+                      "added" if update.version == 1 else "confirmed")
+            LOG.info("%s: operator %s %s obstacle %s (v%d, %d cells marked, %d cleared)", self.config.robot_name,
+                     update.source, action, update.uuid, update.version, len(update.marked), len(update.cleared))
+        elif self.config.require_evidence and topic.event != "RSV":
             # an observation (an Advertise, a renewal) carries only what its sender could have seen; a Resolve
             # restores state and is no observation: the handler never takes it as a renewal (fleet_state)
             update = self._judge(update, topic)

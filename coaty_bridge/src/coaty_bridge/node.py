@@ -43,7 +43,7 @@ _PARAMS = ("broker_url", "namespace", "object_type", "footprint_object_type", "i
            "offline_queue_size", "max_obstacle_extent", "max_obstacle_cells", "compact_indexes", "keepalive", "reconnect_min_delay",
            "reconnect_max_delay", "discover_window", "discover_answer_rate", "discover_answer_burst", "discover_answers", "authenticate_sources", "footprint_area_size",
            "obstacle_area_size",
-           "broker_warn_interval", "max_footprint_extent", "known_robots", "heartbeat_interval",
+           "broker_warn_interval", "max_footprint_extent", "known_robots", "operators", "heartbeat_interval",
            "liveness_timeout", "peer_heartbeat_interval", "insecure", "source_message_rate", "source_message_burst", "source_queue_size",
            "sensor_reach", "max_sensor_reach", "require_evidence", "evidence_window", "max_robot_speed",
            "localisation_tolerance")
@@ -193,6 +193,9 @@ def read_config():
     for name in _PARAMS:
         if name != "broker_url" and rospy.has_param("~" + name):
             kwargs[name] = rospy.get_param("~" + name)
+    if "operators" not in kwargs and rospy.has_param("/fleet/operators"):
+        # the fleet console's operator logins, as the fleet launch's operators:= names them for every robot
+        kwargs["operators"] = rospy.get_param("/fleet/operators")
     broker_wait = rospy.get_param("~broker_wait", 30.0)
     choice = choose_broker_url(RosParams, lambda name: wait_for_param(name, broker_wait))
     robot_name = rospy.get_param("~robot_name", "") or default_robot_name()

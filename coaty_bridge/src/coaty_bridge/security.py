@@ -12,6 +12,9 @@ Layout of the credentials folder (default ``$ROS_HOME/fleet_security``, i.e. ``~
     broker.password           the secret of run_broker's own login (``fleet_broker``: it tells a robot about
                               other connections under its login, logins.py)
     master_control.password   master control's VDA 5050 login (orders, instant actions, zone sets)
+    operators/<name>.password the fleet console's operator logins: they may publish obstacles under their own
+                              identity (remove, confirm, add; the bridges take them with ~operators)
+    viewers/<name>.password   the fleet console's read-only logins: only their Identity, last will and Discovers
 
 Only the plain secrets persist there; the hashed mosquitto password file and the ACL are written
 into the broker's own private directory at every start and whenever a secret in the folder changes
@@ -39,6 +42,8 @@ MONITOR = "fleet_monitor"
 BROKER_LOGIN = "fleet_broker"
 #: master control's VDA 5050 login (its areas' source name too; no robot may take it)
 MASTER_CONTROL_LOGIN = "master_control"
+#: the fleet console's login roles (folder name -> role): an operator may act, a viewer only reads
+CONSOLE_ROLES = {"operators": "operator", "viewers": "viewer"}
 #: robot names that are roles, not robots
 RESERVED_NAMES = (BROKER_LOGIN, MASTER_CONTROL_LOGIN, MONITOR)
 MOSQUITTO_PASSWD = "mosquitto_passwd"
@@ -193,11 +198,65 @@ class FleetCredentials:
         rewrites the password file when it changes."""
         robots = self.robots_in_folder()
         return tuple((robot, read_password_file(self.password_file(robot))) for robot in robots) + tuple(
+            (name, role, read_password_file(self.console_password_file(name, role)))
+            for name, role in self.console_logins()) + tuple(
             read_password_file(p) for p in (self.monitor_password_file, self.broker_password_file,
                                             self.master_control_password_file))
 
     def password_file(self, robot):
         return os.path.join(self.directory, "robots", robot + ".password")
+
+    def console_logins(self):
+        """The fleet console's logins with a secret in the folder: sorted (name, role) pairs."""
+        logins = []
+        for folder, role in sorted(CONSOLE_ROLES.items()):
+            path = os.path.join(self.directory, folder)
+            for entry in (os.listdir(path) if os.path.isdir(path) else ()):
+                name = entry[:-len(".password")]
+                if entry.endswith(".password") and not entry.startswith("."):
+                    try:
+                        check_name(name, "console login")
+                    except ValueError:
+                        continue
+                    logins.append((name, role))
+        return sorted(logins)
+
+    def console_password_file(self, name, role):
+        folder = {r: f for f, r in CONSOLE_ROLES.items()}[role]
+        return os.path.join(self.directory, folder, name + ".password")
+
+    def add_console_login(self, name, role):
+        """Gives the console login ``name`` (role "operator" or "viewer") a secret unless it has one; returns its
+        password file. A name is one login: not a robot's, not a role's, not both an operator and a viewer."""
+        if role not in CONSOLE_ROLES.values():
+            raise ValueError("role %r: operator or viewer" % (role,))
+        check_name(name, "console login")
+        if name in RESERVED_NAMES or name in self.robots_in_folder():
+            raise ValueError("%r is a robot's or a role's name; a console login needs its own" % (name,))
+        for other, other_role in self.console_logins():
+            if other == name and other_role != role:
+                raise ValueError("%r is already a %s login (remove %s first)"
+                                 % (name, other_role, self.console_password_file(name, other_role)))
+        path = self.console_password_file(name, role)
+        os.makedirs(os.path.dirname(path), mode=0o700, exist_ok=True)
+        _secret_file(path)
+        return path
+
+    def console_acl(self):
+        """ACL lines of the console logins (their username is their name, their sourceId their identity): an
+        operator writes every Coaty event under its own identity; a viewer only what joining needs (its Identity
+        advert, its last will, its Discovers), so it can never change an obstacle."""
+        lines = []
+        for name, role in self.console_logins():
+            ident = identity_for(self.namespace, name)
+            lines.append("user %s" % name)
+            if role == "operator":
+                lines += ["topic write coaty/3/+/+/%s" % ident, "topic write coaty/3/+/+/%s/+" % ident]
+            else:
+                lines += ["topic write coaty/3/+/ADV:Identity/%s" % ident, "topic write coaty/3/+/DAD/%s" % ident,
+                          "topic write coaty/3/+/DSC/%s/+" % ident]
+            lines.append("")
+        return lines
 
     @property
     def monitor_password_file(self):
@@ -245,6 +304,8 @@ class FleetCredentials:
             out.write("%s:%s\n" % (MONITOR, read_password_file(self.monitor_password_file)))
             out.write("%s:%s\n" % self.broker_login())
             out.write("%s:%s\n" % (MASTER_CONTROL_LOGIN, read_password_file(self.master_control_password_file)))
+            for name, role in self.console_logins():   # the fleet console's logins: their name is their username
+                out.write("%s:%s\n" % (name, read_password_file(self.console_password_file(name, role))))
         # -U hashes the plain "user:password" lines in place (no secret on a command line)
         proc = subprocess.run([MOSQUITTO_PASSWD, "-U", staged], stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, timeout=60)
@@ -259,7 +320,7 @@ class FleetCredentials:
         with os.fdopen(fd, "w") as out:
             # user rules first: mosquitto applies pattern rules to every login, user rules to one
             out.write("# generated by coaty_bridge.security from config/mosquitto_acl.conf\n"
-                      "user %s\ntopic read $SYS/#\n\n%s" % (MONITOR, rules))
+                      "user %s\ntopic read $SYS/#\n\n%s\n%s" % (MONITOR, "\n".join(self.console_acl()), rules))
         os.replace(staged, acl)
         self.robots = robots
         return robots

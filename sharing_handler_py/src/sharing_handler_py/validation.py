@@ -11,6 +11,7 @@ from typing import Tuple
 
 from sharing_handler_py.errors import InvalidMessageError, InvalidParameterError
 from sharing_msgs import obstacle_rules
+from sharing_msgs.authority import MIN_VERSION_STEP, OPERATOR_VERSION_MARGIN
 
 #: Relative tolerance for comparing resolutions and origins of two grids.
 GEOMETRY_REL_TOL = 1e-6
@@ -313,10 +314,12 @@ class HandlerParams:
         value = self.merge_distance
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < 1e6:
             bad("merge_distance", "must be a number of metres in [0, 1e6)")
-        for name, low in (("max_obstacle_cells", 0), ("max_version_step", 1)):
+        for name, low in (("max_obstacle_cells", 0), ("max_version_step", MIN_VERSION_STEP)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                bad(name, "must be an integer >= %d" % low)
+                bad(name, "must be an integer >= %d" % low + (" (an operator's action on the fleet console goes "
+                    "up to %d versions beyond the highest heard)" % OPERATOR_VERSION_MARGIN
+                    if name == "max_version_step" else ""))
         value = self.max_clock_skew
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
                 value == -1 or 0 <= value <= 3600):

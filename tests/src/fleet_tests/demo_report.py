@@ -285,3 +285,15 @@ _NOT_A_NUMBER = re.compile(r"(?<![A-Za-z])(nan|-?inf)(?![A-Za-z])", re.IGNORECAS
 def numbers_missing(text):
     """The lines of a report that print a number that is not one (nan, inf)."""
     return [line for line in text.splitlines() if _NOT_A_NUMBER.search(line)]
+
+
+def console_section(picture, outcome):
+    """The fleet console's part of the report: the screenshot its browser test took during this demo run."""
+    text = "\n## The operator's view: the fleet console\n\n"
+    text += ("The page a browser shows (`fleet_console`, headless Chromium), taken by its test during this demo on "
+             "two robots on the stand-ins: a share listed on the page, a read-only login refused, an operator's "
+             "removal dropped by every robot's list and costmap, malformed payloads shown as dropped. Test: %s.\n\n"
+             % outcome)
+    if picture:
+        text += "![the fleet console during the demo](%s)\n" % picture
+    return text

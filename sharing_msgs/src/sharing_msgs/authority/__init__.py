@@ -13,6 +13,6 @@ bridge all use these, so no two of them can disagree on a rule.
 from sharing_msgs.authority.errors import AuthorityError  # noqa: F401
 from sharing_msgs.authority.fairness import FairQueue  # noqa: F401
 from sharing_msgs.authority.evidence import EvidenceRule, Judgement, PoseHistory, Sighting  # noqa: F401
-from sharing_msgs.authority.policy import (MASTER_CONTROL, PeerPolicy, check_cells_inside,  # noqa: F401
-                                           rectangle_capacity, single_robot_extent)
+from sharing_msgs.authority.policy import (MASTER_CONTROL, MIN_VERSION_STEP, OPERATOR_VERSION_MARGIN,  # noqa: F401
+                                           PeerPolicy, check_cells_inside, rectangle_capacity, single_robot_extent)
 from sharing_msgs.authority.quotas import DropReport, SourceQuotas, TokenBuckets  # noqa: F401

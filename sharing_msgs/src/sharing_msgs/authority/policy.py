@@ -16,7 +16,11 @@ Discover answers, ROS topics) and to every merge, and the bridges apply before a
   the rectangle, and the caps above would mean nothing;
 - lifetime: a deadline beyond the receiver's own obstacle_duration is cut to it;
 - versions: at most ``max_version_step`` beyond the highest version seen for the obstacle (0 for
-  one not held), so a single message cannot use up the version space;
+  one not held), so a single message cannot use up the version space. The same cap for every
+  source, operators too: an operator's removal or confirmation (fleet_console) goes
+  ``OPERATOR_VERSION_MARGIN`` beyond the highest version its page heard, and no receiver may set a
+  step below ``MIN_VERSION_STEP`` (twice that), so a robot that holds up to a margin's worth fewer
+  versions than the page heard still takes the operator's action;
 - stamps (when ``max_clock_skew`` is set): not older than the lifetime cap plus the skew, not
   more than the skew in the future, so a captured message replayed later is refused.
 """
@@ -34,6 +38,14 @@ MASTER_CONTROL = "master_control"
 #: robot's body, not at its centre (a footprint's circumradius, 0.46 m for the fleet's AGVs), and the
 #: rectangle is drawn around whole cells. See the sharing_msgs README, "Plausible evidence".
 EXTENT_SLACK = 0.5
+
+#: Versions an operator's removal or confirmation (fleet_console, which reads it from the console server)
+#: goes beyond the highest version its page heard for the obstacle: robots keep sending updates of it, and
+#: one in flight at the same moment with the same version would win the tie (the greater source wins).
+OPERATOR_VERSION_MARGIN = 100
+#: The least ``max_version_step`` a receiver takes: an operator's action is at most OPERATOR_VERSION_MARGIN
+#: beyond what the page heard, so a receiver that holds up to another margin fewer versions still takes it.
+MIN_VERSION_STEP = 2 * OPERATOR_VERSION_MARGIN
 
 
 def single_robot_extent(reach):
@@ -57,7 +69,7 @@ class PeerPolicy:
     def __post_init__(self):
         if not (isinstance(self.max_extent, (int, float)) and 0 < self.max_extent < 1e6):
             raise ValueError("max_obstacle_extent %r must be a positive number of metres" % (self.max_extent,))
-        for name, low in (("max_obstacle_cells", 0), ("max_version_step", 1), ("max_lifetime", 1)):
+        for name, low in (("max_obstacle_cells", 0), ("max_version_step", MIN_VERSION_STEP), ("max_lifetime", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError("%s %r must be an integer >= %d" % (name, value, low))
