@@ -68,6 +68,14 @@ class FakeMqtt:
         self.network.in_flight.append((self.owner(), topic, payload))
         return SimpleNamespace(rc=0)
 
+    # The network hands every message to every robot; a Discover's subscription to its own Resolves
+    # changes nothing here.
+    def subscribe(self, topic, qos=0):
+        return 0, 1
+
+    def unsubscribe(self, topic):
+        return 0, 1
+
 
 class Robot:
     """Handler + bridge client, wired as the two nodes wire them (list -> Discover answers)."""
