@@ -9,6 +9,11 @@ object per stdin line:
   {"cmd": "list", "robot": r, "msgs": [...]}      publish <robot>/shared_obstacle_list (latched)
   {"cmd": "footprint", "robot": r, "frame_id": f, "points": [[x, y], ...], "stamp": s}
                                                   publish <robot>/move_base/global_costmap/footprint
+  {"cmd": "watch_state", "robot": r}              subscribe <robot>/fleet_state (the Resolves answering its
+                                                  bridge's Discover: copies restoring state, not on from_fleet)
+                                                  and print each as {"event": "fleet_state", "robot": r, "msg": ...};
+                                                  opt-in, since a new subscriber of a started bridge's fleet_state
+                                                  is a restarted handler to it (it asks the fleet again)
 It also prints every <robot>/fleet_robots as {"event": "fleet_robots", "robot": r, "robots": [...]}.
 Publishing waits until the bridge is subscribed, then prints {"event": "sent"}.
 """
@@ -99,6 +104,10 @@ def main():
         elif cmd["cmd"] == "list":
             array = SharedObstacleArray(obstacles=[from_dict(m) for m in cmd["msgs"]])
             lists[cmd["robot"]].publish(array)
+            emit({"event": "sent", "connected": True})
+        elif cmd["cmd"] == "watch_state":
+            rospy.Subscriber("/%s/fleet_state" % cmd["robot"], SharedObstacle, lambda msg, r=cmd["robot"]: emit(
+                {"event": "fleet_state", "robot": r, "msg": to_dict(msg)}))
             emit({"event": "sent", "connected": True})
     rospy.signal_shutdown("stdin closed")
 

@@ -159,16 +159,29 @@ def test_coaty_js_peer_and_bridges_interoperate(coaty_js, ros_graph, json_lines_
                 ("js_peer", [[4.0, 4.0], [5.0, 4.0], [5.0, 5.0]])]
 
             # (d) a bridge started late gets the obstacles already in the fleet: robot_0's
-            # (from its shared_obstacle_list) and the JS peer's (the peer answers Discover too)
+            # (from its shared_obstacle_list) and the JS peer's (the peer answers Discover too). The Resolves
+            # answering its Discover restore state, so they come on robot_1/fleet_state, not from_fleet (issue 43:
+            # the handler never takes them as an observation or a renewal)
             probe.send({"cmd": "list", "robot": "robot_0", "msgs": [mine]})
             probe.expect(lambda e: e.get("event") == "sent", what="list sent")
+            sent = len([e for e in probe.events if e.get("event") == "sent"])
+            probe.send({"cmd": "watch_state", "robot": "robot_1"})
+            probe.expect(lambda e: len([s for s in probe.events if s.get("event") == "sent"]) > sent,
+                         what="robot_1/fleet_state subscribed")
             ros_graph.bridge("robot_1", *params)
             for uuid in (mine["uuid"], theirs["uuid"]):
-                probe.expect(lambda e: e.get("event") == "from_fleet" and e["robot"] == "robot_1" and
+                probe.expect(lambda e: e.get("event") == "fleet_state" and e["robot"] == "robot_1" and
                              e["msg"]["uuid"] == uuid, timeout=20, what="(d) obstacle %s at late robot_1" % uuid)
-            late_mine = [e["msg"] for e in probe.events if e.get("event") == "from_fleet"
-                         and e["robot"] == "robot_1" and e["msg"]["uuid"] == mine["uuid"]][0]
-            assert late_mine["marked_indexes"] == mine["marked_indexes"] and late_mine["source"] == "robot_0"
+            late = {e["msg"]["uuid"]: e["msg"] for e in probe.events if e.get("event") == "fleet_state"
+                    and e["robot"] == "robot_1"}
+            assert late[mine["uuid"]]["marked_indexes"] == mine["marked_indexes"]
+            assert late[mine["uuid"]]["source"] == "robot_0"
+            assert late[theirs["uuid"]]["marked_indexes"] == [3, 4, 23] and late[theirs["uuid"]]["source"] == "js_peer"
+            # theirs is in no list of robot_0's: the JS peer's own answer brought it
+            peer.expect(lambda e: e.get("event") == "discoverAnswered" and e["count"] >= 1,
+                        what="(d) the Coaty JS peer answered robot_1's Discover")
+            assert not [e for e in probe.events if e.get("event") == "from_fleet" and e["robot"] == "robot_1"
+                        and e["msg"]["uuid"] in late], "a Resolve restoring state came on from_fleet as an observation"
 
             # (c) the peer sees the Deadvertise of a killed bridge (the last will)
             robot_0.send_signal(signal.SIGKILL)
