@@ -390,19 +390,18 @@ class BridgeNode:
 
     def _on_fleet_footprint_withdrawn(self, robot, topic):
         """MQTT thread: a peer took its footprint back (stopped, or its navigation went quiet)."""
-        if self.fleet.forget(robot):
-            rospy.loginfo("%s: fleet robot %s withdrew its footprint (sourceId %s)", self.config.robot_name, robot,
-                          topic.source_id)
-            try:
+        try:
+            if self.fleet.forget(robot):
+                rospy.loginfo("%s: fleet robot %s withdrew its footprint (sourceId %s)", self.config.robot_name,
+                              robot, topic.source_id)
                 self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), rospy.get_time(),
                                                                 self.footprint_config.robot_timeout))
-            except rospy.ROSException:
-                # While the launch shuts down, peers' bridges withdraw their footprints as ours closes its
-                # topics: nobody is left to tell, so that is no error. Any other time it is one.
-                if not rospy.is_shutdown():
-                    raise
-                rospy.logdebug("%s: %s withdrew its footprint while this node shut down", self.config.robot_name,
-                               robot)
+        except rospy.ROSException:
+            # While the launch shuts down, peers' bridges withdraw their footprints as rospy closes our topics
+            # (/rosout and fleet_robots, before is_shutdown() turns true): nobody is left to tell, so that is no
+            # error. Any other time it is one.
+            if not (rospy.is_shutdown() or rospy.core.is_shutdown_requested()):
+                raise
 
     def _footprint_tick(self, _event=None):
         """At footprint_rate: advertise this robot's footprint while it is fresh, forget silent fleet
