@@ -37,6 +37,27 @@ def _free_port():
         return s.getsockname()[1]
 
 
+def _start_master(ros_port, log_dir):
+    """(env, process): a private rosmaster on ``ros_port`` and the environment that points a node at it, with this
+    package's source first on PYTHONPATH."""
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % ros_port, ROS_IP="127.0.0.1",
+               ROS_HOSTNAME="127.0.0.1", PYTHONPATH=os.path.join(PKG, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               ROS_LOG_DIR=log_dir)
+    return env, subprocess.Popen(["rosmaster", "--core", "-p", str(ros_port)], env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _stop(proc):
+    """SIGINT as roslaunch sends it, SIGKILL if the process has not ended 10 s later."""
+    if proc is not None and proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 def test_node_reports_blocked_edge_and_delivers_zone(broker, wait_for):
     reason = _ros_missing()
     if reason:
@@ -47,11 +68,7 @@ def test_node_reports_blocked_edge_and_delivers_zone(broker, wait_for):
 
     host, port = broker
     ros_port = _free_port()
-    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % ros_port, ROS_IP="127.0.0.1",
-               ROS_HOSTNAME="127.0.0.1", PYTHONPATH=os.path.join(PKG, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
-               ROS_LOG_DIR=os.environ.get("ROS_LOG_DIR", "/tmp/vda5050_bridge_test_logs"))
-    master_proc = subprocess.Popen(["rosmaster", "--core", "-p", str(ros_port)], env=env,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    env, master_proc = _start_master(ros_port, os.environ.get("ROS_LOG_DIR", "/tmp/vda5050_bridge_test_logs"))
     node = None
     mc = None
     procs = []
@@ -143,20 +160,8 @@ def test_node_reports_blocked_edge_and_delivers_zone(broker, wait_for):
         if mc is not None:
             mc.stop()
         for proc in procs:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
-        if node is not None and node.poll() is None:
-            node.send_signal(signal.SIGINT)
-            try:
-                node.wait(10)
-            except subprocess.TimeoutExpired:
-                node.kill()
-                node.wait()
+            _stop(proc)
+        _stop(node)
         master_proc.terminate()
         master_proc.wait(10)
 
@@ -182,11 +187,7 @@ def test_node_as_the_readme_shows_it_warns_about_namespace_handler_and_broker(tm
     if reason:
         pytest.skip(reason)
     ros_port, dead_port = _free_port(), _free_port()      # nothing listens on dead_port
-    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % ros_port, ROS_IP="127.0.0.1",
-               ROS_HOSTNAME="127.0.0.1", PYTHONPATH=os.path.join(PKG, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
-               ROS_LOG_DIR=str(tmp_path / "log"))
-    master_proc = subprocess.Popen(["rosmaster", "--core", "-p", str(ros_port)], env=env,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    env, master_proc = _start_master(ros_port, str(tmp_path / "log"))
     log = tmp_path / "node.err"
     node = None
     try:
@@ -204,13 +205,7 @@ def test_node_as_the_readme_shows_it_warns_about_namespace_handler_and_broker(tm
         assert "ROS_NAMESPACE=robot_0 rosrun vda5050_bridge vda5050_bridge" in log.read_text()
         assert node.poll() is None, "the node keeps running"
     finally:
-        if node is not None and node.poll() is None:
-            node.send_signal(signal.SIGINT)
-            try:
-                node.wait(10)
-            except subprocess.TimeoutExpired:
-                node.kill()
-                node.wait()
+        _stop(node)
         master_proc.terminate()
         master_proc.wait(10)
 
@@ -223,11 +218,7 @@ def test_in_a_namespace_with_a_handler_list_and_a_broker_it_stays_quiet(broker, 
         pytest.skip(reason)
     host, port = broker
     ros_port = _free_port()
-    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % ros_port, ROS_IP="127.0.0.1",
-               ROS_HOSTNAME="127.0.0.1", PYTHONPATH=os.path.join(PKG, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
-               ROS_LOG_DIR=str(tmp_path / "log"))
-    master_proc = subprocess.Popen(["rosmaster", "--core", "-p", str(ros_port)], env=env,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    env, master_proc = _start_master(ros_port, str(tmp_path / "log"))
     log = tmp_path / "node.err"
     procs = []
     mc = None
@@ -250,12 +241,6 @@ def test_in_a_namespace_with_a_handler_list_and_a_broker_it_stays_quiet(broker, 
         if mc is not None:
             mc.stop()
         for proc in procs:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+            _stop(proc)
         master_proc.terminate()
         master_proc.wait(10)
