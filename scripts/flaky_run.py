@@ -186,7 +186,7 @@ def main(argv=None):
     if not args.demo and not args.test:
         parser.error("name a rostest (a .test path, or PKG FILE), or give --demo")
     what = "demo" if args.demo else "rostest"
-    out = args.results or os.path.join(RESULTS, "demo" if args.demo else test_name(args.test))
+    out = args.results or os.path.join(RESULTS, what if args.demo else test_name(args.test))
     os.makedirs(out, exist_ok=True)
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     print("flaky_run: %s %s, %d runs beside %d busy processes, %d cores, commit %s, %s"
@@ -211,8 +211,8 @@ def main(argv=None):
     finally:
         stop_load(load)
     with open(os.path.join(out, "summary.json"), "w") as f:
-        json.dump({"test": ["demo"] + args.test if args.demo else args.test, "load_processes": args.load, "commit": commit(), "started": started,
-                   "runs": runs}, f, indent=1)
+        json.dump({"test": [what] + args.test if args.demo else args.test, "load_processes": args.load,
+                   "commit": commit(), "started": started, "runs": runs}, f, indent=1)
     print(summary_line(runs), flush=True)
     return 0 if all(r["passed"] for r in runs) else 1
 
