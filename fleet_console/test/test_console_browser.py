@@ -15,7 +15,6 @@ import glob
 import json
 import os
 import signal
-import socket
 import subprocess
 import threading
 import time
@@ -23,6 +22,7 @@ import uuid as uuidlib
 
 import pytest
 
+from coaty_bridge.broker import free_port
 from fleet_console.browser import ConsolePage, missing
 
 ENV = dict(os.environ, ROS_IP="127.0.0.1", ROS_HOSTNAME="127.0.0.1")
@@ -30,12 +30,6 @@ ROBOTS = ("robot_0", "robot_1")
 BOUND = 1.0   # s, the bound for share -> page and remove -> every robot's list and costmap
 
 pytestmark = pytest.mark.skipif(bool(missing()), reason="not installed (scripts/setup.sh): %s" % missing())
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_until(predicate, what, timeout=60.0):

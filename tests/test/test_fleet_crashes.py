@@ -15,7 +15,6 @@ wall-clock bound flaky); otherwise the test waits for the outcome up to 90 s."""
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -24,17 +23,13 @@ import xmlrpc.client
 
 import pytest
 
+from coaty_bridge.broker import free_port
+
 ENV = dict(os.environ, ROS_IP="127.0.0.1", ROS_HOSTNAME="127.0.0.1")
 ROBOTS = ("robot_0", "robot_1", "robot_2")
 HERE = os.path.dirname(os.path.abspath(__file__))
 WAIT = 90.0
 RESTORE_BOUND = 10.0
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_until(predicate, what, timeout=WAIT):
