@@ -102,6 +102,22 @@ Fan randomFan(std::mt19937& rng, unsigned int beams, double span, double first, 
   }
   return fan;
 }
+
+/// The benchmarks' reference scan as a fan from its origin, every beam cut at range_m.
+void referenceFan(double range_m, Fan* fan)
+{
+  const sharing_layer::bench::Scene scene = sharing_layer::bench::makeScene();
+  const sharing_layer::GridGeometry& g = scene.geometry;
+  fan->size_x = g.size_x;
+  fan->size_y = g.size_y;
+  ASSERT_TRUE(g.worldToMap(scene.scan.origin.x, scene.scan.origin.y, fan->x0, fan->y0));
+  for (const sharing_layer::Point3& p : scene.scan.points)
+  {
+    unsigned int x1 = 0, y1 = 0;
+    ASSERT_TRUE(g.worldToMap(p.x, p.y, x1, y1));
+    fan->to(x1, y1, g.cellDistance(range_m));
+  }
+}
 }  // namespace
 
 TEST(FanClearing, RandomFansClearTheCellsOfEveryBeam)
@@ -129,18 +145,8 @@ TEST(FanClearing, RandomFansClearTheCellsOfEveryBeam)
 
 TEST(FanClearing, TheReferenceScanIsFilledNearTheSensorAndEqualToRaytracing)
 {
-  const sharing_layer::bench::Scene scene = sharing_layer::bench::makeScene();
-  const sharing_layer::GridGeometry& g = scene.geometry;
   Fan fan;
-  fan.size_x = g.size_x;
-  fan.size_y = g.size_y;
-  ASSERT_TRUE(g.worldToMap(scene.scan.origin.x, scene.scan.origin.y, fan.x0, fan.y0));
-  for (const sharing_layer::Point3& p : scene.scan.points)
-  {
-    unsigned int x1 = 0, y1 = 0;
-    ASSERT_TRUE(g.worldToMap(p.x, p.y, x1, y1));
-    fan.to(x1, y1, g.cellDistance(30.0));
-  }
+  ASSERT_NO_FATAL_FAILURE(referenceFan(30.0, &fan));
   FanStats stats;
   EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
   // Most beams share the near field, which then takes a fraction of their steps.
@@ -151,19 +157,10 @@ TEST(FanClearing, TheReferenceScanIsFilledNearTheSensorAndEqualToRaytracing)
 TEST(FanClearing, TheReferenceScanCutAtThreeMetresIsFilledThoughNoBeamReachesTheNearSteps)
 {
   // raytrace_range 3 m: every beam is cut at 60 cells, before kNearSteps; the runs fill as far as their shortest beam.
-  const sharing_layer::bench::Scene scene = sharing_layer::bench::makeScene();
-  const sharing_layer::GridGeometry& g = scene.geometry;
   Fan fan;
-  fan.size_x = g.size_x;
-  fan.size_y = g.size_y;
-  ASSERT_TRUE(g.worldToMap(scene.scan.origin.x, scene.scan.origin.y, fan.x0, fan.y0));
-  for (const sharing_layer::Point3& p : scene.scan.points)
-  {
-    unsigned int x1 = 0, y1 = 0;
-    ASSERT_TRUE(g.worldToMap(p.x, p.y, x1, y1));
-    fan.to(x1, y1, g.cellDistance(3.0));
-    ASSERT_LT(fan.lines.back().end, kNearSteps);
-  }
+  ASSERT_NO_FATAL_FAILURE(referenceFan(3.0, &fan));
+  for (const LineSteps& line : fan.lines)
+    ASSERT_LT(line.end, kNearSteps);
   FanStats stats;
   EXPECT_EQ("", firstDifference(fan, beamByBeam(fan), together(fan, &stats)));
   EXPECT_GT(stats.grouped_beams, fan.lines.size() * 8 / 10);
