@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""Runs one rostest N times beside a CPU load and says how many runs passed, with each failure's reason.
+"""Runs one rostest (or pytest files, or the demo) N times beside a CPU load and says how many runs passed, with each
+failure's reason.
 
 A test that passes on an idle machine but fails when the CPU is busy depends on CPU headroom (a
 timeout in wall time, a controller that cannot keep up with a sped-up simulation). This runs it the
@@ -9,8 +10,11 @@ last. Each run is judged by its outcome only (rostest's exit code and its JUnit 
 how long it took; the reasons are the failing assertions' messages.
 
 Usage: flaky_run.py [--repeat N] [--load K] [--results DIR] TEST...
+       flaky_run.py --pytest [--repeat N] [--load K] [--results DIR] FILE...
        flaky_run.py --demo [--repeat N] [--load K] [--results DIR] [DEMO OPTION...]
   TEST is what rostest takes: a path (fleet_nav/test/nav/nav_willow.test) or PKG FILE.
+  --pytest runs `python3 -m pytest FILE...` (test files that start their own master and broker, such as
+  coaty_bridge/test/test_attacks_nodes.py), judged like a rostest by its exit code and its JUnit results.
   --demo runs `make demo`'s program (scripts/run_demo.py, its options after --demo's) instead, each run
   writing its report to DIR/run_<i>; a run passes when it exits 0 and its report lists no failed check.
   Prints one line per run and ends with "k of N passed"; exit 0 only when every run passed.
@@ -75,7 +79,7 @@ def read_cases(path):
     return cases
 
 
-def judge(returncode, test_cases, summary_cases):
+def judge(returncode, test_cases, summary_cases, program="rostest"):
     """(passed, reasons) of one run. ``test_cases`` are the test programs' own results
     (rosunit-*.xml), ``summary_cases`` rostest's summary of them (rostest-*.xml, which also reports
     a test that never wrote results: a time limit, a required node that died). A run passes when
@@ -87,7 +91,7 @@ def judge(returncode, test_cases, summary_cases):
     if not ran:
         reasons.append("no test results")
     if returncode != 0 and not reasons:
-        reasons.append("rostest exited %d" % returncode)
+        reasons.append("%s exited %d" % (program, returncode))
     unique = []
     for reason in reasons:
         if reason not in unique:
@@ -101,6 +105,12 @@ def judge_folder(returncode, folder):
     for xml in sorted(glob.glob(os.path.join(folder, "**", "*.xml"), recursive=True)):
         (summary_cases if os.path.basename(xml).startswith("rostest-") else test_cases).extend(read_cases(xml))
     return judge(returncode, test_cases, summary_cases)
+
+
+def judge_pytest(returncode, folder):
+    """judge() on the one JUnit file pytest wrote into ``folder`` (its --junitxml); pytest has no summary file."""
+    path = os.path.join(folder, "pytest.xml")
+    return judge(returncode, read_cases(path) if os.path.exists(path) else [], [], program="pytest")
 
 
 def judge_demo(returncode, folder):
@@ -172,6 +182,17 @@ def test_name(test):
     return os.path.splitext(os.path.basename(test[-1]))[0]
 
 
+def run_command(what, folder, test):
+    """(command, judge) of one run writing its results to ``folder``."""
+    if what == "demo":
+        return [sys.executable, os.path.join(ROOT, "scripts", "run_demo.py"), "--out", folder] + test, judge_demo
+    if what == "pytest":
+        os.makedirs(folder, exist_ok=True)
+        return ([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--junitxml",
+                 os.path.join(folder, "pytest.xml")] + test, judge_pytest)
+    return ["rostest", "--results-base-dir", folder] + test, judge_folder
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=10, help="runs (default 10)")
@@ -179,18 +200,22 @@ def main(argv=None):
     parser.add_argument("--results", help="folder for the runs' results (default test_results/flaky/<test>)")
     parser.add_argument("--demo", action="store_true",
                         help="run scripts/run_demo.py (make demo) instead of a rostest; TEST... are its options")
+    parser.add_argument("--pytest", action="store_true",
+                        help="run python3 -m pytest on TEST... (test files) instead of a rostest")
     parser.add_argument("test", nargs="*", help="rostest's arguments: a .test path, or PKG FILE")
     args = parser.parse_args(argv)
     if args.repeat < 1 or args.load < 0:
         parser.error("--repeat must be >= 1 and --load >= 0")
+    if args.demo and args.pytest:
+        parser.error("--demo and --pytest exclude each other")
     if not args.demo and not args.test:
-        parser.error("name a rostest (a .test path, or PKG FILE), or give --demo")
-    what = "demo" if args.demo else "rostest"
+        parser.error("name a rostest (a .test path, or PKG FILE), test files with --pytest, or give --demo")
+    what = "demo" if args.demo else "pytest" if args.pytest else "rostest"
     out = args.results or os.path.join(RESULTS, what if args.demo else test_name(args.test))
     os.makedirs(out, exist_ok=True)
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-    print("flaky_run: %s %s, %d runs beside %d busy processes, %d cores, commit %s, %s"
-          % (what, " ".join(args.test), args.repeat, args.load, os.cpu_count() or 0, commit(), started), flush=True)
+    print("flaky_run: %s, %d runs beside %d busy processes, %d cores, commit %s, %s"
+          % (" ".join([what] + args.test), args.repeat, args.load, os.cpu_count() or 0, commit(), started), flush=True)
     runs = []
     load = start_load(args.load)
     try:
@@ -198,11 +223,10 @@ def main(argv=None):
             folder = os.path.join(out, "run_%d" % i)
             subprocess.run(["rm", "-rf", folder], check=False)  # a stale result must not count as this run's
             before, t0 = os.getloadavg()[0], time.monotonic()
-            command = [sys.executable, os.path.join(ROOT, "scripts", "run_demo.py"), "--out", folder] + args.test \
-                if args.demo else ["rostest", "--results-base-dir", folder] + args.test
+            command, judge_run = run_command(what, folder, args.test)
             with open(folder + ".log", "w") as log:
                 proc = subprocess.run(command, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
-            passed, reasons = (judge_demo if args.demo else judge_folder)(proc.returncode, folder)
+            passed, reasons = judge_run(proc.returncode, folder)
             run = {"index": i, "passed": passed, "reasons": reasons, "returncode": proc.returncode,
                    "wall_s": round(time.monotonic() - t0, 1), "load_before": before,
                    "load_after": os.getloadavg()[0], "log": folder + ".log"}

@@ -181,3 +181,35 @@ def test_flaky_run_needs_a_rostest_or_demo(capsys):
     with pytest.raises(SystemExit):
         flaky.main(["--repeat", "1"])
     assert "name a rostest" in capsys.readouterr().err
+
+
+def test_pytest_files_run_n_times_and_each_failure_is_named(tmp_path, capsys):
+    # a real pytest run of a test file that fails on its second run only (a counter file beside it)
+    test = tmp_path / "test_second_fails.py"
+    test.write_text("import os\nCOUNT = os.path.join(os.path.dirname(__file__), 'count')\n\n"
+                    "def test_second_run_fails():\n"
+                    "    n = int(open(COUNT).read()) + 1 if os.path.exists(COUNT) else 1\n"
+                    "    open(COUNT, 'w').write(str(n))\n"
+                    "    assert n != 2, 'the second run broke'\n")
+    out = tmp_path / "out"
+    code = flaky.main(["--pytest", "--repeat", "3", "--load", "0", "--results", str(out), str(test)])
+    text = capsys.readouterr().out
+    assert code == 1
+    assert "flaky_run: pytest %s, 3 runs" % test in text
+    assert "2 of 3 passed" in text
+    assert "run 2/3: FAILED" in text and "the second run broke" in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["passed"] for r in summary["runs"]] == [True, False, True]
+
+
+def test_a_pytest_run_without_results_or_with_a_bad_exit_fails(tmp_path):
+    assert flaky.judge_pytest(4, str(tmp_path)) == (False, ["no test results"])
+    (tmp_path / "pytest.xml").write_text(PASSED_UNIT)
+    assert flaky.judge_pytest(0, str(tmp_path)) == (True, [])
+    assert flaky.judge_pytest(1, str(tmp_path)) == (False, ["pytest exited 1"])
+
+
+def test_demo_and_pytest_exclude_each_other(capsys):
+    with pytest.raises(SystemExit):
+        flaky.main(["--demo", "--pytest", "x.py"])
+    assert "exclude each other" in capsys.readouterr().err
