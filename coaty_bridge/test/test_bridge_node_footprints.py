@@ -101,8 +101,8 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
     on, and the laser marks the robot's front, which the peer then shares as an obstacle (seen in the fleet
     bench). So adverts go out whenever the footprint moved footprint_min_move (default 0.1 m), and the
     receiving bridge passes each one on at once; here the heartbeat is slow (0.5 Hz) so that neither can
-    pass for the other."""
-    params = ["broker_url:=" + broker.url, "footprint_rate:=0.5", "robot_timeout:=5.0"]
+    pass for the other. Dead reckoning off (footprint_driving_interval 0): test_dead_reckoning_node covers it."""
+    params = ["broker_url:=" + broker.url, "footprint_rate:=0.5", "robot_timeout:=5.0", "footprint_driving_interval:=0.0"]
     # near_distance 0: every advert precise. robot_1 advertises nothing, so with the default robot_0 would know no
     # robot near it and advertise every footprint_far_move only (test_footprint_adverts.py covers that)
     ros_graph.bridge("robot_0", *params, "footprint_near_distance:=0.0")
@@ -143,6 +143,43 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
         probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(xs[-1] + 0.01 * (k % 3))})
         time.sleep(0.1)
     assert len(robot_0_adverts(observer)) - before <= 2, "a standing robot advertised on every footprint"
+    for node in ros_graph.nodes[:2]:
+        assert node.poll() is None, "a bridge died"
+
+
+def test_a_driving_robots_dead_reckoned_adverts_are_moved_on_by_the_peer(ros_graph, broker, observer, wait_for):
+    """Dead reckoning (the default footprint_driving_interval 2 s): a robot driving straight states its velocity
+    and advertises rarely; the peer's bridge moves its footprint on between adverts, on fleet_robots for the layer.
+    Outcomes only: the footprints go out at the probe's pace, whatever the load makes of it."""
+    params = ["broker_url:=" + broker.url, "robot_timeout:=5.0", "footprint_near_distance:=0.0"]
+    ros_graph.bridge("robot_0", *params)
+    ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
+    probe = ros_graph.probe("robot_0", "robot_1")
+    wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
+    probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY})
+
+    def square_at(x):
+        return [[x + px - 1.0, py] for px, py in SQUARE]
+    wait_for(lambda: probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(1.0)})
+             or robot_0_adverts(observer), timeout=15, what="robot_0's first advert")
+    wait_fleet(probe, "robot_1", lambda robots: robots, wait_for, what="robot_1 knows robot_0")
+    before, start = len(robot_0_adverts(observer)), len(probe.events)
+    steps = 40   # 0.65 m/s at move_base's 5 Hz: 0.13 m every 0.2 s, 5.2 m
+    for k in range(1, steps + 1):
+        probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(1.0 + 0.13 * k)})
+        time.sleep(0.2)
+    adverts = [a[1]["object"] for a in robot_0_adverts(observer)[before:]]
+    moving = [a for a in adverts if "velocity" in a]
+    assert moving, "robot_0 drove 5.2 m straight and stated no velocity: %s" % adverts
+    assert all(a["validFor"] == pytest.approx(fp.PARKED_VALIDITY * fp.DEFAULT_DRIVING_INTERVAL) for a in moving)
+    assert all(0.2 <= a["velocity"][0] <= 2.0 and abs(a["velocity"][1]) < 0.05 for a in moving), moving
+    assert len(adverts) < steps, "%d adverts for %d footprints: as many as without dead reckoning" % (len(adverts), steps)
+    # Between two of its adverts, robot_1 listed robot_0 at more than one place: moved on, not held still.
+    lists = [e for e in list(probe.events)[start:] if e.get("event") == "fleet_robots" and e["robot"] == "robot_1"
+             and e["robots"]]
+    places = {round(e["robots"][0]["points"][0][0], 3) for e in lists}
+    assert len(places) > len(adverts), "robot_1 listed robot_0 at %d places for %d adverts: not moved on between them" % (
+        len(places), len(adverts))
     for node in ros_graph.nodes[:2]:
         assert node.poll() is None, "a bridge died"
 

@@ -114,9 +114,10 @@ class EvidenceMixin:
         return True
 
     def _note_sighting(self, footprint):
-        """A peer's footprint advert, accepted: a pose it advertised, with its reach."""
+        """A peer's footprint advert, accepted: a pose it advertised, with its reach. A dead-reckoned advert's
+        validFor promises no pose but the one at its stamp (the robot drives on): it is a sighting without one."""
         sighting = Sighting.from_footprint(footprint.points, footprint.stamp, footprint.reach, footprint.frame_id,
-                                           footprint.valid_for)
+                                           0.0 if footprint.moving else footprint.valid_for)
         with self._lock:
             self._poses.note(footprint.robot, sighting)
 

@@ -8,11 +8,16 @@ its own objectType (default ``org.fleetsharing.RobotFootprint``) on
     {"objectType": "org.fleetsharing.RobotFootprint", "coreType": "CoatyObject",
      "objectId": <uuid of this advert series>, "name": "robot_0",
      "robot": "robot_0", "stamp": 1700000000.25, "frameId": "map",
-     "footprint": [[x, y], [x, y], ...], "reach": 4.0}
+     "footprint": [[x, y], [x, y], ...], "reach": 4.0, "velocity": [vx, vy], "validFor": 5.0}
 
 ``footprint`` is the polygon in ``frameId`` at ``stamp`` (move_base's global_costmap/footprint).
 ``reach`` (m, optional, issue 43) is how far the robot's sensors see from there: the evidence its
 obstacle messages are judged by (sharing_msgs.authority.evidence); an advert without it claims nothing.
+``velocity`` (m/s in ``frameId``, optional, with ``validFor``): a driving robot's dead-reckoned advert.
+Receivers move the footprint on at that velocity from when they heard it, for at most validFor /
+PARKED_VALIDITY s (the sender's advert interval), and the sender advertises again as soon as its true
+footprint leaves the one so moved by ``footprint_min_move`` (AdvertSchedule): a straight drive costs an
+advert every ``footprint_driving_interval`` s instead of one every 0.1 m.
 Receivers keep the latest advert per robot and forget a robot not heard for ``robot_timeout``;
 the sharing layers never share cells within a known robot's footprint plus a margin.
 
@@ -26,11 +31,13 @@ along both axes (and some up to 2A away). A is fleet-wide; 0 puts every advert u
 objectType, heard by everyone. Adverts under the plain objectType are always heard (a peer that
 does not use areas, such as a Coaty JS agent).
 """
+import collections
 import json
 import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Tuple
 
+from coaty_bridge.areas import area_of
 from coaty_bridge.errors import (InvalidNameError, MissingFieldError, NonFiniteNumberError,
                                  OutOfRangeError, WrongTypeError)
 from coaty_bridge.topics import _NAME_RE, _UUID_RE
@@ -56,6 +63,13 @@ PARKED_VALIDITY = 2.5
 #: s between a far driving robot's adverts when it moves less than far_move (AdvertSchedule)
 FAR_INTERVAL = 10.0
 #: Longest sensor reach an advert may state, m (a receiver caps it further: max_sensor_reach).
+#: Fastest velocity an advert may state, m/s: a warehouse robot, with room to spare.
+MAX_SPEED = 20.0
+#: s of own footprints a driving robot's velocity is estimated over (move_base's footprint topic at 5 Hz:
+#: three samples, so one late footprint does not swing it)
+VELOCITY_SPAN = 0.4
+#: s between a driving robot's dead-reckoned adverts when nothing else sends one (footprint_driving_interval)
+DEFAULT_DRIVING_INTERVAL = 2.0
 MAX_REACH = 1000.0
 #: footprint_area_size bounds, m (0 is allowed too: no areas).
 MIN_AREA_SIZE = 1.0
@@ -88,8 +102,17 @@ class RobotFootprint:
     valid_for: float = 0.0
     # m the robot's sensors reach from its pose (issue 43: the evidence its obstacle messages are judged by)
     reach: float = 0.0
+    # m/s (vx, vy) in frame_id: a dead-reckoned advert; receivers move it on (HeardRobot.points_at)
+    velocity: Tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
+        velocity = self.velocity
+        if not isinstance(velocity, (list, tuple)) or len(velocity) != 2:
+            raise WrongTypeError("velocity %s is not [vx, vy]" % _short(velocity))
+        vx, vy = (_finite_number("velocity", v) for v in velocity)
+        if math.hypot(vx, vy) > MAX_SPEED:
+            raise OutOfRangeError("velocity (%r, %r) faster than %g m/s" % (vx, vy, MAX_SPEED))
+        object.__setattr__(self, "velocity", (vx, vy))
         reach = _finite_number("reach", self.reach)
         if not 0.0 <= reach <= MAX_REACH:
             raise OutOfRangeError("reach %r outside [0, %g] m" % (reach, MAX_REACH))
@@ -130,6 +153,11 @@ class RobotFootprint:
                                   % (max(xs) - min(xs), max(ys) - min(ys), MAX_EXTENT))
         object.__setattr__(self, "points", tuple(clean))
 
+    @property
+    def moving(self):
+        """Whether this is a dead-reckoned advert: a velocity, and a validity to move it on for."""
+        return self.valid_for > 0 and self.velocity != (0.0, 0.0)
+
 
 def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
     """RobotFootprint -> CoatyObject dict."""
@@ -148,6 +176,8 @@ def footprint_to_object(footprint, object_id, object_type=DEFAULT_FOOTPRINT_OBJE
         obj["validFor"] = footprint.valid_for
     if footprint.reach > 0:
         obj["reach"] = footprint.reach
+    if footprint.moving:
+        obj["velocity"] = [round(v, 3) for v in footprint.velocity]   # mm/s
     return obj
 
 
@@ -172,7 +202,8 @@ def footprint_from_object(obj, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
     if not isinstance(obj["frameId"], str):
         raise WrongTypeError("frameId %s is not a string" % _short(obj["frameId"]))
     return RobotFootprint(robot=obj["robot"], stamp=obj["stamp"], frame_id=obj["frameId"],
-                          points=obj["footprint"], valid_for=obj.get("validFor", 0.0), reach=obj.get("reach", 0.0))
+                          points=obj["footprint"], valid_for=obj.get("validFor", 0.0), reach=obj.get("reach", 0.0),
+                          velocity=obj.get("velocity", (0.0, 0.0)))
 
 
 def decode_footprint_advertise(data, object_type=DEFAULT_FOOTPRINT_OBJECT_TYPE):
@@ -205,6 +236,17 @@ class HeardRobot:
         if self.footprint.valid_for <= 0.0:
             return self.heard_at
         return max(self.heard_at, min(now, self.heard_at + self.footprint.valid_for - timeout))
+
+    def points_at(self, now):
+        """The footprint where this bridge believes the robot is at ``now`` (its clock): a dead-reckoned advert
+        moved on at its velocity since it was heard, for at most the sender's advert interval (validFor /
+        PARKED_VALIDITY; a lost advert then leaves the robot where that brought it, not driving on for ever)."""
+        footprint = self.footprint
+        if not footprint.moving:
+            return footprint.points
+        dt = min(max(now - self.heard_at, 0.0), footprint.valid_for / PARKED_VALIDITY)
+        vx, vy = footprint.velocity
+        return tuple((x + vx * dt, y + vy * dt) for x, y in footprint.points)
 
 
 def extent(points):
@@ -287,11 +329,21 @@ def largest_move(a, b):
     return max(math.hypot(q[0] - p[0], q[1] - p[1]) for p, q in zip(a, b))
 
 
+def shifted(points, dx, dy):
+    return tuple((x + dx, y + dy) for x, y in points)
+
+
 class AdvertSchedule:
     """When this robot advertises its footprint (issue 29: adverts were 40 % of the fleet's bytes).
 
-    - at once when a vertex moved ``min_move`` since the last advert (a peer's view lags by at most that);
-    - while moving (such an advert within ``parked_after`` s), at ``rate`` as a heartbeat;
+    - at once when a vertex moved ``min_move`` from where the peers believe it (the last advert, moved on
+      at its velocity when it stated one): a peer's view lags by at most that;
+    - while moving (such an advert within ``parked_after`` s), at ``rate`` as a heartbeat, or with dead
+      reckoning (``driving_interval`` > 0) every ``driving_interval`` s: each such advert states the
+      robot's velocity (``advert_velocity``, estimated over VELOCITY_SPAN s of footprints) and is valid
+      for PARKED_VALIDITY times that interval; receivers move it on (HeardRobot.points_at), so a straight
+      drive sends a heartbeat, and a turn, a stop or a change of speed sends at once. An advert also goes
+      at once when the robot enters another square of ``area_size`` (its adverts' topic changes);
     - parked, every ``parked_interval`` s, each advert valid for PARKED_VALIDITY times that, so the
       peers keep the robot between them (``validFor`` on the wire; older receivers use their own
       robot_timeout, and forget a parked robot between adverts).
@@ -300,66 +352,133 @@ class AdvertSchedule:
       PARKED_VALIDITY times that. No peer's sensors reach the robot, so no peer needs its pose within
       ``min_move``; the first footprint that is near again sends at once (it moved ``min_move`` since).
     ``parked_interval`` 0 (or ``min_move`` 0: motion is not watched) keeps the rate at all times;
-    ``far_move`` 0 makes every robot near.
-    Pure: the caller passes the time and sends what it is told; ``sent`` records it."""
+    ``far_move`` 0 makes every robot near; ``driving_interval`` 0 sends every ``min_move`` (no velocity).
+    Pure: the caller passes the time and sends what it is told (the validFor returned, and
+    ``advert_velocity``); ``sent`` records it."""
 
-    def __init__(self, rate, min_move, parked_interval, parked_after=2.0, far_move=0.0):
+    def __init__(self, rate, min_move, parked_interval, parked_after=2.0, far_move=0.0, driving_interval=0.0,
+                 area_size=0.0):
         self.rate, self.min_move = float(rate), float(min_move)
         self.parked_interval, self.parked_after = float(parked_interval), float(parked_after)
         self.far_move = float(far_move)
+        self.driving_interval, self.area_size = float(driving_interval), float(area_size)
         self._last_points = None
         self._last_time = None
         self._last_valid_for = 0.0
+        self._last_kind = None
+        self._last_velocity = (0.0, 0.0)
         self._last_motion = -math.inf
         self._motion_ref = None   # the footprint where motion was last seen (adverts or not: far ones are rare)
+        self._samples = collections.deque()   # (time, centroid) of the recent own footprints
+        self._velocity = (0.0, 0.0)
+        self.decision = ("precise", (0.0, 0.0))   # (kind, velocity) of the advert just decided
 
     def _far(self, near):
         return not near and self.far_move > 0 and self.min_move > 0
+
+    def _dead_reckoning(self):
+        return self.driving_interval > 0 and self.min_move > 0
 
     def _watch_motion(self, points, now):
         if self.min_move > 0 and self._motion_ref is not None \
                 and largest_move(self._motion_ref, points) >= self.min_move:
             self._last_motion, self._motion_ref = now, tuple(points)
 
+    def _estimate(self, points, now):
+        """The velocity over the last VELOCITY_SPAN s of footprints; (0, 0) when too few, or slower than one
+        min_move per driving_interval (the peers' view then drifts less than the min_move that resends)."""
+        here, samples = centroid(points), self._samples
+        if samples and now < samples[-1][0]:
+            samples.clear()                     # a clock that went back (a new simulation)
+        if not samples or now > samples[-1][0]:
+            samples.append((now, here))
+        while len(samples) > 2 and now - samples[1][0] >= VELOCITY_SPAN:
+            samples.popleft()
+        then, there = samples[0]
+        if now - then < 0.5 * VELOCITY_SPAN:
+            return (0.0, 0.0)
+        vx, vy = ((here[0] - there[0]) / (now - then), (here[1] - there[1]) / (now - then))
+        if math.hypot(vx, vy) < self.min_move / self.driving_interval or math.hypot(vx, vy) > MAX_SPEED:
+            return (0.0, 0.0)
+        return (vx, vy)
+
+    def believed(self, now):
+        """The footprint the peers believe this robot has at ``now``: the last advert, moved on at its velocity
+        for at most driving_interval s (as HeardRobot.points_at does); None before any advert."""
+        if self._last_points is None or self._last_velocity == (0.0, 0.0):
+            return self._last_points
+        dt = min(max(now - self._last_time, 0.0), self.driving_interval)
+        return shifted(self._last_points, self._last_velocity[0] * dt, self._last_velocity[1] * dt)
+
+    def _area_changed(self, points):
+        return self.area_size > 0 and self._last_points is not None and \
+            area_of(centroid(points), self.area_size) != area_of(centroid(self._last_points), self.area_size)
+
+    def _decide(self, kind, valid_for, velocity=(0.0, 0.0)):
+        self.decision = (kind, velocity)
+        return valid_for
+
+    @property
+    def advert_velocity(self):
+        """The velocity the advert just decided states ((0, 0) unless dead-reckoned)."""
+        return self.decision[1]
+
+    def _moving_advert(self):
+        """The advert of a robot that moves near others: dead-reckoned, or precise."""
+        if self._dead_reckoning():
+            return self._decide("driving", PARKED_VALIDITY * self.driving_interval, self._velocity)
+        return self._decide("precise", 0.0)
+
     def on_footprint(self, points, now, near=True):
         """A new own footprint: the validFor of an advert to send now (a motion advert), or None."""
         self._watch_motion(points, now)
+        if self._dead_reckoning():
+            self._velocity = self._estimate(points, now)
         if self.min_move <= 0 or self._last_points is None:
             return None
+        moved = largest_move(self.believed(now), points)
         if self._far(near):
-            if largest_move(self._last_points, points) >= self.far_move:
-                return PARKED_VALIDITY * FAR_INTERVAL
-            return None
-        if largest_move(self._last_points, points) >= self.min_move:
+            return self._decide("far", PARKED_VALIDITY * FAR_INTERVAL) if moved >= self.far_move else None
+        if moved >= self.min_move or (self._dead_reckoning() and self._area_changed(points)):
             self._last_motion = now
-            return 0.0
+            return self._moving_advert()
         return None
 
-    def on_tick(self, points, now, near=True):
-        """The ``rate`` tick: the validFor of an advert to send now, or None to skip this tick."""
+    def on_tick(self, points, now, near=True, at=None):
+        """The ``rate`` tick: the validFor of an advert to send now, or None to skip this tick. ``at``: when
+        ``points`` were taken (the last footprint's stamp; default ``now``), what the peers' belief is compared at."""
         self._watch_motion(points, now)
         far = self._far(near)
-        if self._last_time is None or largest_move(self._last_points, points) >= max(
+        if self._last_time is None or largest_move(self.believed(now if at is None else at), points) >= max(
                 self.far_move if far else self.min_move, 1e-9):
             if self._last_points is not None and self.min_move > 0:
                 self._last_motion = now
-            return PARKED_VALIDITY * FAR_INTERVAL if far and self._last_time is not None else 0.0
+            if self._last_time is None:
+                return self._decide("precise", 0.0)    # the first: nothing known of its motion yet
+            if far:
+                return self._decide("far", PARKED_VALIDITY * FAR_INTERVAL)
+            return self._moving_advert()
         since = now - self._last_time
         parked = self.parked_interval > 0 and self.min_move > 0 and now - self._last_motion >= self.parked_after
         if not parked and not far:
-            # skipped when a motion advert went out since the previous tick
-            return 0.0 if not 0.0 <= since < 0.75 / self.rate else None
-        interval = self.parked_interval if parked else FAR_INTERVAL
-        if self._last_valid_for <= 0 or not 0.0 <= since < interval:
-            return PARKED_VALIDITY * interval
+            # the heartbeat, skipped when a motion advert went out since the previous tick
+            interval = self.driving_interval if self._dead_reckoning() else 1.0 / self.rate
+            return self._moving_advert() if not 0.0 <= since < interval - 0.25 / self.rate else None
+        kind, interval = ("parked", self.parked_interval) if parked else ("far", FAR_INTERVAL)
+        if self._last_kind != kind or not 0.0 <= since < interval:
+            return self._decide(kind, PARKED_VALIDITY * interval)
         return None
 
     @property
     def last_valid_for(self):
-        """validFor of the last advert sent (0 before any, or when it was not a parked one)."""
+        """validFor of the last advert sent (0 before any, or when it was a precise one)."""
         return self._last_valid_for
 
-    def sent(self, points, now, valid_for):
+    def sent(self, points, now, valid_for, decision=None):
+        """An advert went out at ``now`` with ``valid_for``: the one decided last, or ``decision`` (kind,
+        velocity) read with it where another thread may decide in between."""
+        kind, velocity = decision or self.decision
         self._last_points, self._last_time, self._last_valid_for = tuple(points), now, valid_for
+        self._last_kind, self._last_velocity = kind, velocity if valid_for > 0 else (0.0, 0.0)
         if self._motion_ref is None:
             self._motion_ref = tuple(points)

@@ -28,8 +28,8 @@ from coaty_bridge import liveness
 from coaty_bridge.codec import ObstacleUpdate
 from coaty_bridge.errors import CoatyError
 from coaty_bridge.security import read_password_file
-from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotTable, MAX_VALID_FOR, near_any,
-                                    RobotFootprint as FootprintValue, centroid)
+from coaty_bridge.footprint import (PARKED_VALIDITY, AdvertSchedule, FleetRobotTable,
+                                    MAX_VALID_FOR, near_any, RobotFootprint as FootprintValue, centroid)
 
 LOG = logging.getLogger(__name__)
 
@@ -111,7 +111,8 @@ class FootprintConfig:
     """The node's footprint parameters (fleet robots are never shared); ValueError names a bad one."""
 
     def __init__(self, topic="move_base/global_costmap/footprint", rate=2.0, robot_timeout=3.0, advertise=True,
-                 min_move=0.1, parked_interval=30.0, near_distance=5.0, far_move=1.0):
+                 min_move=0.1, parked_interval=30.0, near_distance=5.0, far_move=1.0,
+                 driving_interval=2.0):
         if not isinstance(topic, str) or not topic:
             raise ValueError("parameter footprint_topic = %r: must be a topic name" % (topic,))
         for name, value, low, high in (("footprint_rate", rate, 0.1, 50.0), ("robot_timeout", robot_timeout, 0.1, 3600.0),
@@ -119,7 +120,9 @@ class FootprintConfig:
                                        ("footprint_parked_interval", parked_interval, 0.0,
                                         MAX_VALID_FOR / PARKED_VALIDITY),
                                        ("footprint_near_distance", near_distance, 0.0, 100.0),
-                                       ("footprint_far_move", far_move, 0.0, 10.0)):
+                                       ("footprint_far_move", far_move, 0.0, 10.0),
+                                       ("footprint_driving_interval", driving_interval, 0.0,
+                                        MAX_VALID_FOR / PARKED_VALIDITY)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
                 raise ValueError("parameter %s = %r: must be %g..%g" % (name, value, low, high))
         if not isinstance(advertise, bool):
@@ -134,10 +137,13 @@ class FootprintConfig:
         self.min_move = float(min_move)
         self.parked_interval = float(parked_interval)
         self.near_distance, self.far_move = float(near_distance), float(far_move)
+        self.driving_interval = float(driving_interval)
 
-    def schedule(self):
+    def schedule(self, area_size=0.0):
+        """The advert schedule; ``area_size`` is the bridge's footprint_area_size (a new square sends at once)."""
         return AdvertSchedule(self.rate, self.min_move, self.parked_interval,
-                              far_move=self.far_move if self.near_distance > 0 else 0.0)
+                              far_move=self.far_move if self.near_distance > 0 else 0.0,
+                              driving_interval=self.driving_interval, area_size=area_size)
 
     @classmethod
     def from_params(cls):
@@ -148,7 +154,8 @@ class FootprintConfig:
                    min_move=rospy.get_param("~footprint_min_move", 0.1),
                    parked_interval=rospy.get_param("~footprint_parked_interval", 30.0),
                    near_distance=rospy.get_param("~footprint_near_distance", 5.0),
-                   far_move=rospy.get_param("~footprint_far_move", 1.0))
+                   far_move=rospy.get_param("~footprint_far_move", 1.0),
+                   driving_interval=rospy.get_param("~footprint_driving_interval", 2.0))
 
 
 def polygon_to_footprint(msg, robot, now):
@@ -160,8 +167,9 @@ def polygon_to_footprint(msg, robot, now):
 
 
 def fleet_robots_message(heard, now, timeout):
-    """The known fleet robots as a RobotFootprintArray; each robot's stamp is when it was heard, kept
-    fresh for a parked robot's validFor (HeardRobot.vouched_at, ``timeout`` the robot_timeout)."""
+    """The known fleet robots as a RobotFootprintArray at ``now``: a dead-reckoned advert moved on
+    (HeardRobot.points_at); each robot's stamp is when it was heard, kept fresh for an advert's validFor
+    (HeardRobot.vouched_at, ``timeout`` the robot_timeout)."""
     array = RobotFootprintArray()
     array.header.stamp = rospy.Time.from_sec(now)
     for item in heard:
@@ -169,9 +177,13 @@ def fleet_robots_message(heard, now, timeout):
         robot.header.stamp = rospy.Time.from_sec(max(0.0, item.vouched_at(now, timeout)))
         robot.header.frame_id = item.footprint.frame_id
         robot.robot = item.footprint.robot
-        robot.footprint.points = [Point32(x, y, 0.0) for x, y in item.footprint.points]
+        robot.footprint.points = [Point32(x, y, 0.0) for x, y in item.points_at(now)]
         array.robots.append(robot)
     return array
+
+
+#: Hz fleet_robots is published at while a known robot drives on a dead-reckoned advert (ROS only, not the wire)
+MOVING_PEERS_RATE = 10.0
 
 
 def default_robot_name():
@@ -255,7 +267,8 @@ class BridgeNode:
         self._counters = {}
         self._sender_drops_reported = {}   # per-sender drop counters at the last diagnostics
         self._own_footprint = None   # (RobotFootprint, ROS time it arrived)
-        self._adverts = self.footprint_config.schedule()   # when to advertise the own footprint
+        # when to advertise the own footprint
+        self._adverts = self.footprint_config.schedule(config.footprint_area_size)
         self._stale_logged = False
         self.fleet = FleetRobotTable(config.robot_name, self.footprint_config.robot_timeout, rospy.get_time)
         # A message that cannot be delivered is dropped there; the publisher stays usable.
@@ -279,6 +292,8 @@ class BridgeNode:
         rospy.Subscriber(self.footprint_config.topic, PolygonStamped, self._on_own_footprint, queue_size=10)
         self._timer = rospy.Timer(rospy.Duration(1.0), self._publish_diagnostics)
         self._footprint_timer = rospy.Timer(rospy.Duration(1.0 / self.footprint_config.rate), self._footprint_tick)
+        # driving peers' dead-reckoned footprints, moved on for the layer between their adverts
+        self._moving_timer = rospy.Timer(rospy.Duration(1.0 / MOVING_PEERS_RATE), self._moving_peers_tick)
 
     def start(self, subscriber_wait):
         """Connects to the fleet once from_fleet has a subscriber (or after ``subscriber_wait``
@@ -327,6 +342,7 @@ class BridgeNode:
     def shutdown(self):
         self._timer.shutdown()
         self._footprint_timer.shutdown()
+        self._moving_timer.shutdown()
         self.client.stop()
 
     def _count(self, key):
@@ -357,22 +373,27 @@ class BridgeNode:
         self.client.note_own_footprint(footprint)   # the evidence before its obstacle messages
         # A peer's layer must not share this robot's front: while it drives, its pose at the peers may lag by
         # at most min_move (plus transport), not by a whole heartbeat period of driving.
+        # The schedule runs on the footprint's stamp (when the pose held), not on when it arrived here: the
+        # velocity of a dead-reckoned advert is not to swing with the footprint topic's transport delays.
         if self.footprint_config.advertise:
             near = self._near(footprint.points)
             with self._lock:
-                valid_for = self._adverts.on_footprint(footprint.points, now, near)
+                valid_for = self._adverts.on_footprint(footprint.points, footprint.stamp, near)
+                decision = self._adverts.decision
             if valid_for is not None:
-                self._advertise(footprint, now, valid_for)
+                self._advertise(footprint, footprint.stamp, valid_for, decision)
 
     def _near(self, points):
         """Whether a known fleet robot is within footprint_near_distance (else this robot's adverts are far ones)."""
-        return near_any(points, [r.footprint.points for r in self.fleet.robots()], self.footprint_config.near_distance)
+        now = rospy.get_time()
+        return near_any(points, [r.points_at(now) for r in self.fleet.robots()], self.footprint_config.near_distance)
 
-    def _advertise(self, footprint, now, valid_for):
-        footprint = dataclasses.replace(footprint, valid_for=valid_for)
+    def _advertise(self, footprint, at, valid_for, decision):
+        """Sends the advert the schedule decided on ``footprint`` (taken ``at``, its stamp)."""
+        footprint = dataclasses.replace(footprint, valid_for=valid_for, velocity=decision[1])
         if self.client.publish_footprint(footprint):
             with self._lock:
-                self._adverts.sent(footprint.points, now, valid_for)
+                self._adverts.sent(footprint.points, at, valid_for, decision)
 
     def _on_fleet_footprint(self, footprint, topic):
         """MQTT thread: a peer's footprint advert (already validated)."""
@@ -414,9 +435,10 @@ class BridgeNode:
                 # The heartbeat: at the rate while moving, rarely while parked (AdvertSchedule).
                 near = self._near(own[0].points)
                 with self._lock:
-                    valid_for = self._adverts.on_tick(own[0].points, now, near)
+                    valid_for = self._adverts.on_tick(own[0].points, now, near, at=own[0].stamp)
+                    decision = self._adverts.decision
                 if valid_for is not None:
-                    self._advertise(own[0], now, valid_for)
+                    self._advertise(own[0], own[0].stamp, valid_for, decision)
                 self._stale_logged = False
             elif not self._stale_logged:
                 self._stale_logged = True
@@ -433,6 +455,14 @@ class BridgeNode:
             rospy.loginfo("%s: fleet robot %s forgotten: not heard for robot_timeout %.1f s",
                           self.config.robot_name, name, self.footprint_config.robot_timeout)
         self.fleet_robots.publish(fleet_robots_message(self.fleet.robots(), now, self.footprint_config.robot_timeout))
+
+    def _moving_peers_tick(self, _event=None):
+        """At MOVING_PEERS_RATE while a known robot drives on a dead-reckoned advert: its footprint where it is now,
+        so that the layer's view of it lags by footprint_min_move plus a tenth of a second of driving, not by the
+        footprint_rate tick (0.5 s: 0.33 m at 0.65 m/s)."""
+        robots = self.fleet.robots()
+        if any(r.footprint.moving for r in robots):
+            self.fleet_robots.publish(fleet_robots_message(robots, rospy.get_time(), self.footprint_config.robot_timeout))
 
     def _on_to_fleet(self, msg):
         try:
