@@ -128,7 +128,10 @@ def message_kind(topic):
     parts = topic.split("/")
     event = parts[3] if len(parts) > 3 else "?"
     if event.startswith("ADV::"):
-        return "footprint" if "RobotFootprint" in event else "obstacle"
+        if "RobotFootprint" in event:
+            # with footprint areas, only the evidence before an obstacle message goes under the plain objectType
+            return "footprint" if ".area_" in event else "evidence"
+        return "obstacle"
     if event.startswith("CHN:"):
         for kind in ("heartbeat", "echo"):   # peers' heartbeats; the own echo (liveness.py)
             if kind in event.lower():

@@ -1,7 +1,8 @@
-"""The evidence a bridge sends with its own obstacle messages (issue 43; coaty_bridge/evidence.py): this robot's
-footprint taken within evidence_window of the message's stamp goes out just before it; a message made before
-any such footprint waits for one (at most EVIDENCE_WAIT s) instead of going out without and being refused by
-every peer for good. Pure: the client's publish path with a fake clock, its sends recorded; no broker."""
+"""The evidence a bridge sends with its own obstacle messages (issues 43 and 46; coaty_bridge/evidence.py): this
+robot's footprint taken within evidence_window of the message's stamp goes inside it (``evidence``), and inside the
+renewals of it; a message made before any such footprint waits for one (at most EVIDENCE_WAIT s) instead of going
+out without and being refused by every peer for good. Pure: the client's publish path with a fake clock, its sends
+recorded; no broker."""
 import json
 
 import pytest
@@ -39,26 +40,21 @@ def footprint(stamp, x=1.0):
                                      points=((x, 2.0), (x + 0.5, 2.0), (x + 0.5, 2.5), (x, 2.5)))
 
 
-def kinds(sent):
-    """'footprint <stamp>' / 'obstacle <uuid>' for each send, in order."""
-    out = []
-    for topic, obj in sent:
-        if "uuid" in obj:
-            out.append("obstacle " + obj["uuid"])
-        else:
-            out.append("footprint %.2f" % obj["stamp"])
-    return out
+def sent_obstacles(sent):
+    """(uuid, evidence or None) of each obstacle sent, in order; nothing else may have been sent."""
+    assert all("uuid" in obj for _topic, obj in sent), "a separate evidence advert went out: %s" % sent
+    return [(obj["uuid"], obj.get("evidence")) for _topic, obj in sent]
 
 
-def test_a_message_before_any_footprint_waits_for_one_and_goes_out_right_behind_it(bridge, make_update):
+def test_a_message_before_any_footprint_waits_for_one_and_goes_out_carrying_it(bridge, make_update):
     client, clock, sent = bridge
     update = make_update(stamp=100.0)
     assert client.publish_obstacle(update)
     assert sent == [] and client.counters()["awaiting_evidence"] == 1
     client.note_own_footprint(footprint(101.0))
-    assert kinds(sent) == ["footprint 101.00", "obstacle " + update.uuid]
-    assert sent[0][1]["reach"] == 3.0          # the reach peers judge its cells by
-    assert client.counters()["evidence_adverts_sent"] == 1
+    # the footprint's centroid (1.25, 2.25), its circumradius and the reach peers judge its cells by
+    assert sent_obstacles(sent) == [(update.uuid, [101.0, 1.25, 2.25, 0.354, 3.0])]
+    assert client.counters()["published_with_evidence"] == 1
 
 
 @pytest.mark.parametrize("offset,evidence", [(WINDOW - 0.01, True), (WINDOW + 0.01, False)])
@@ -68,7 +64,7 @@ def test_a_footprint_is_evidence_only_within_the_window_of_the_stamp(bridge, mak
     update = make_update(stamp=100.0)
     client.publish_obstacle(update)
     if evidence:
-        assert kinds(sent) == ["footprint %.2f" % (100.0 + offset), "obstacle " + update.uuid]
+        assert sent_obstacles(sent) == [(update.uuid, [100.0 + offset, 1.25, 2.25, 0.354, 3.0])]
     else:
         assert sent == [], "sent with a footprint %.2f s from its stamp" % offset
 
@@ -82,7 +78,7 @@ def test_without_a_footprint_within_the_wait_it_goes_out_without_evidence_its_le
     assert sent == []
     clock.now += 0.2
     client.release_unevidenced()
-    assert kinds(sent) == ["obstacle " + update.uuid]
+    assert sent_obstacles(sent) == [(update.uuid, None)]
     assert sent[0][1]["deadline"] == 54           # the 5.1 s it waited taken off: 54.9 s, rounded down
     assert client.counters()["published_without_evidence"] == 1
 
@@ -95,15 +91,35 @@ def test_a_footprint_too_far_from_the_stamp_releases_nothing(bridge, make_update
     assert sent == [] and client.counters()["awaiting_evidence"] == 1
 
 
-def test_the_footprint_nearest_the_stamp_is_sent_with_a_message_that_waited_offline(bridge, make_update):
+def test_the_footprint_nearest_the_stamp_goes_with_a_message_that_waited_offline(bridge, make_update):
     """Updates queued while the broker was away go out later: each with the pose it was made at."""
     client, clock, sent = bridge
     for stamp, x in ((100.0, 1.0), (104.0, 3.0), (108.0, 5.0)):
         client.note_own_footprint(footprint(stamp, x))
     update = make_update(stamp=104.3)
     client.publish_obstacle(update)
-    assert kinds(sent) == ["footprint 104.00", "obstacle " + update.uuid]
-    assert sent[0][1]["footprint"][0] == [3.0, 2.0]
+    assert sent_obstacles(sent) == [(update.uuid, [104.0, 3.25, 2.25, 0.354, 3.0])]
+
+
+def test_a_renewal_carries_the_evidence_of_the_update_it_renews(bridge, make_update):
+    """Far robots heard neither the area-scoped update nor (now) any separate advert: the renewal brings it."""
+    from coaty_bridge import renewals
+    client, clock, sent = bridge
+    client.note_own_footprint(footprint(100.0))
+    update = client._with_evidence(make_update(stamp=100.0))
+    ((_chunk, obj),) = renewals.renewals_objects([update], lambda: "00000000-0000-4000-8000-000000000000")
+    assert obj["obstacles"][0][7] == [100.0, 1.25, 2.25, 0.354, 3.0]
+    (back,) = renewals.decode_renewals(json.loads(renewals.renewals_payload(obj)), OT).obstacles
+    assert back.evidence == (100.0, 1.25, 2.25, 0.354, 3.0)
+
+
+def test_a_footprint_in_another_frame_is_no_evidence(bridge, make_update):
+    client, clock, sent = bridge
+    client.expect_footprints(False)
+    client.note_own_footprint(footprints.RobotFootprint(robot="robot_0", stamp=100.0, frame_id="odom",
+                                                        points=((1.0, 2.0), (1.5, 2.0), (1.5, 2.5))))
+    client.publish_obstacle(make_update(stamp=100.0))
+    assert sent_obstacles(sent)[0][1] is None
 
 
 def test_a_robot_that_advertises_no_footprint_sends_at_once(bridge, make_update):
@@ -111,4 +127,4 @@ def test_a_robot_that_advertises_no_footprint_sends_at_once(bridge, make_update)
     client.expect_footprints(False)
     update = make_update(stamp=100.0)
     client.publish_obstacle(update)
-    assert kinds(sent) == ["obstacle " + update.uuid]
+    assert sent_obstacles(sent) == [(update.uuid, None)]

@@ -9,10 +9,14 @@ obstacle re-advertises it with a higher version)::
      "uuid": <uuid>, "source": "robot_0", "version": 3, "stamp": 1700000000.25,
      "frameId": "map", "deadline": 60, "rectangle": [min_x, min_y, max_x, max_y],
      "resolution": 0.05, "origin": [x, y], "size": [size_x, size_y],
-     "markedIndexes": [...] | "<compact>", "clearedIndexes": [...] | "<compact>"}
+     "markedIndexes": [...] | "<compact>", "clearedIndexes": [...] | "<compact>",
+     "evidence": [stamp, x, y, radius, reach]}
 
 An index field is either a JSON array of ints or a string in the compact
-encoding of ``compact.py``; both mean the same set.
+encoding of ``compact.py``; both mean the same set. ``evidence`` (optional) is where the
+sender stood when it saw the cells: its footprint's centroid (x, y) and circumradius in
+``frameId``, taken at ``stamp`` on its own clock, and how far its sensors reach from there
+(m): what receivers judge its cells by (sharing_msgs.authority.evidence; evidence.py).
 """
 import json
 import math
@@ -105,8 +109,12 @@ class ObstacleUpdate:
     size_y: int
     marked: Tuple[int, ...] = ()
     cleared: Tuple[int, ...] = ()
+    # (stamp, x, y, radius, reach): where the sender stood when it saw the cells (check_evidence); None: not said
+    evidence: Optional[Tuple[float, float, float, float, float]] = None
 
     def __post_init__(self):
+        if self.evidence is not None:
+            object.__setattr__(self, "evidence", check_evidence(self.evidence))
         # The one validation shared with the handler (sharing_msgs.obstacle_rules): whatever
         # passes here also passes the handler's from_fleet check and serialises as a ROS message.
         try:
@@ -120,6 +128,39 @@ class ObstacleUpdate:
         object.__setattr__(self, "rectangle", tuple(float(v) for v in self.rectangle))
         for name in ("marked", "cleared"):
             object.__setattr__(self, name, tuple(sorted(set(getattr(self, name)))))
+
+
+#: Largest circumradius of a footprint in evidence, m: that of the footprint module's MAX_EXTENT square (a
+#: receiver caps it further by its max_footprint_extent, as it does a footprint advert's)
+MAX_EVIDENCE_RADIUS = 50.0 * math.sqrt(0.5)
+#: Largest sensor reach evidence may state, m (the footprint module's MAX_REACH)
+MAX_EVIDENCE_REACH = 1000.0
+
+
+def check_evidence(value):
+    """An obstacle's ``evidence`` [stamp, x, y, radius, reach] as a tuple of floats; raises WrongTypeError,
+    NonFiniteNumberError or OutOfRangeError naming the bad value."""
+    if not isinstance(value, (list, tuple)) or len(value) != 5:
+        raise WrongTypeError("evidence %s is not [stamp, x, y, radius, reach]" % _short(value))
+    names = ("stamp", "x", "y", "radius", "reach")
+    for name, v in zip(names, value):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise WrongTypeError("evidence %s %s is not a number" % (name, _short(v)))
+        if not math.isfinite(v):
+            raise NonFiniteNumberError("evidence %s %r is not finite" % (name, v))
+    stamp, x, y, radius, reach = (float(v) for v in value)
+    for name, v, low, high in (("stamp", stamp, 0.0, float(MAX_UINT32)), ("x", x, -1.0e6, 1.0e6),
+                               ("y", y, -1.0e6, 1.0e6), ("radius", radius, 0.0, MAX_EVIDENCE_RADIUS),
+                               ("reach", reach, 0.0, MAX_EVIDENCE_REACH)):
+        if not low <= v <= high:
+            raise OutOfRangeError("evidence %s %r outside [%g, %g]" % (name, v, low, high))
+    return (stamp, x, y, radius, reach)
+
+
+def evidence_to_list(evidence):
+    """The wire form of an update's evidence: millimetres, the stamp as it is."""
+    stamp, x, y, radius, reach = evidence
+    return [stamp, round(x, 3), round(y, 3), round(radius, 3), reach]
 
 
 _ERROR_BY_KIND = {
@@ -262,7 +303,7 @@ def obstacle_to_object(update, object_type=DEFAULT_OBJECT_TYPE, compact_indexes=
     """ObstacleUpdate -> CoatyObject dict."""
     def indexes(values):
         return compact.encode_indexes(values) if compact_indexes else list(values)
-    return {
+    obj = {
         "objectType": object_type,
         "coreType": "CoatyObject",
         "objectId": update.uuid,
@@ -280,6 +321,9 @@ def obstacle_to_object(update, object_type=DEFAULT_OBJECT_TYPE, compact_indexes=
         "markedIndexes": indexes(update.marked),
         "clearedIndexes": indexes(update.cleared),
     }
+    if update.evidence is not None:
+        obj["evidence"] = evidence_to_list(update.evidence)
+    return obj
 
 
 def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimits()):
@@ -335,6 +379,7 @@ def obstacle_from_object(obj, object_type=DEFAULT_OBJECT_TYPE, limits=CodecLimit
         size_y=size_y,
         marked=marked,
         cleared=cleared,
+        evidence=check_evidence(obj["evidence"]) if obj.get("evidence") is not None else None,
     )
     check_inside(update)
     return update

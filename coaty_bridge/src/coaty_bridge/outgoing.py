@@ -33,7 +33,7 @@ class OutgoingMixin:
         while offline."""
         if not waited and self._wait_for_evidence(update):
             return True               # sent as soon as a footprint near its stamp is here (evidence.py)
-        self._send_evidence(update)   # every peer hears where this robot is before what it saw (evidence.py)
+        update = self._with_evidence(update)   # where this robot stood when it saw the cells (evidence.py)
         area = self._area_for(update)
         object_type = self.config.object_type if area is None else areas.area_object_type(self.config.object_type,
                                                                                             area)
@@ -270,7 +270,6 @@ class OutgoingMixin:
                 if fresh is not update:
                     # under the objectType it was queued with (an area's, or the plain one)
                     payload = self._obstacle_payload(fresh, parse_topic(topic).object_type)
-                self._send_evidence(fresh)   # its evidence did not go while offline (evidence.py)
                 # its deadline is now valid as of now (should the send fail and re-queue it)
                 self._send(topic, payload, update=fresh, queued_at=now)
             else:

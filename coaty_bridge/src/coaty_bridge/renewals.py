@@ -12,10 +12,11 @@ which every bridge observes, as one CoatyObject::
      "source": "robot_0", "frameId": "map", "resolution": 0.05, "origin": [x, y],
      "size": [size_x, size_y],
      "obstacles": [[uuid, version, stamp, deadline, [min_x, min_y, max_x, max_y],
-                    markedIndexes, clearedIndexes], ...]}
+                    markedIndexes, clearedIndexes, evidence], ...]}
 
 Each entry means exactly the obstacle object with those fields plus the shared ones (its
-``deadline`` aged to the moment of sending, as every deadline on the wire), and is validated by
+``deadline`` aged to the moment of sending, as every deadline on the wire; ``evidence``, where its
+sender saw the cells, is left out when unknown), and is validated by
 ``codec.obstacle_from_object``, the one check of an obstacle: a bad entry is reported alone and
 the good ones are kept.
 """
@@ -48,10 +49,16 @@ def renewals_objects(updates, object_id_factory):
                 "objectType": OBJECT_TYPE, "coreType": "CoatyObject", "objectId": object_id_factory(),
                 "name": source, "source": source, "frameId": frame_id, "resolution": resolution,
                 "origin": list(origin), "size": list(size),
-                "obstacles": [[u.uuid, u.version, u.stamp, u.deadline, list(u.rectangle),
-                               compact.encode_indexes(u.marked), compact.encode_indexes(u.cleared)]
-                              for u in chunk]}))
+                "obstacles": [_entry(u) for u in chunk]}))
     return objects
+
+
+def _entry(update):
+    entry = [update.uuid, update.version, update.stamp, update.deadline, list(update.rectangle),
+             compact.encode_indexes(update.marked), compact.encode_indexes(update.cleared)]
+    if update.evidence is not None:
+        entry.append(codec.evidence_to_list(update.evidence))
+    return entry
 
 
 def renewals_payload(obj):
@@ -78,13 +85,13 @@ def decode_renewals(data, object_type, limits=codec.CodecLimits()):
         raise OutOfRangeError("obstacles: %d renewals in one event, more than %d" % (len(entries), MAX_ENTRIES))
     found, errors = [], []
     for k, entry in enumerate(entries):
-        if not isinstance(entry, list) or len(entry) != 7:
+        if not isinstance(entry, list) or len(entry) not in (7, 8):
             errors.append(WrongTypeError("renewal %d %s is not [uuid, version, stamp, deadline, rectangle, "
-                                         "markedIndexes, clearedIndexes]" % (k, codec._short(entry))))
+                                         "markedIndexes, clearedIndexes(, evidence)]" % (k, codec._short(entry))))
             continue
-        uuid, version, stamp, deadline, rectangle, marked, cleared = entry
+        uuid, version, stamp, deadline, rectangle, marked, cleared = entry[:7]
         full = dict(shared, objectType=object_type, coreType="CoatyObject", objectId=uuid, name="", uuid=uuid,
                     version=version, stamp=stamp, deadline=deadline, rectangle=rectangle,
-                    markedIndexes=marked, clearedIndexes=cleared)
+                    markedIndexes=marked, clearedIndexes=cleared, evidence=entry[7] if len(entry) == 8 else None)
         codec.collect_obstacle(full, object_type, limits, found, errors)
     return codec.ObstacleBatch(tuple(found), tuple(errors))
