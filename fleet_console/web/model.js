@@ -177,7 +177,18 @@ class FleetModel {
     const r = this.robot(o.robot);
     r.footprint = o.footprint; r.heardAt = this.clock(); r.objectId = o.objectId;
     r.validFor = isNum(o.validFor) ? o.validFor : 0;
+    r.velocity = Array.isArray(o.velocity) && o.velocity.length === 2 && o.velocity.every(isNum) ? o.velocity : [0, 0];
     this.seeStamp(o.stamp);
+  }
+
+  // where robot r is now: a driving robot's dead-reckoned advert (velocity and validFor) moved on from when it was
+  // heard, for at most validFor / 2.5 s (the sender's advert interval), as the bridges do (coaty_bridge footprint.py)
+  footprintAt(r) {
+    if (!r.footprint) return null;
+    const [vx, vy] = r.velocity || [0, 0];
+    if (!(r.validFor > 0) || (vx === 0 && vy === 0)) return r.footprint;
+    const dt = Math.min(Math.max((this.clock() - r.heardAt) / 1000, 0), r.validFor / 2.5);
+    return r.footprint.map(([x, y]) => [x + vx * dt, y + vy * dt]);
   }
 
   heartbeat(o) {

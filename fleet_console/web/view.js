@@ -46,11 +46,12 @@ function drawMap() {
     ctx.fillText(e.uuid.slice(0, 8), px(e.rectangle[0]), py(e.rectangle[3]) - 3);
   }
   for (const r of C.model.robots.values()) {
-    if (!r.footprint) continue;
+    const points = C.model.footprintAt(r);
+    if (!points) continue;
     ctx.beginPath();
-    r.footprint.forEach(([x, y], k) => k ? ctx.lineTo(px(x), py(y)) : ctx.moveTo(px(x), py(y)));
+    points.forEach(([x, y], k) => k ? ctx.lineTo(px(x), py(y)) : ctx.moveTo(px(x), py(y)));
     ctx.closePath(); ctx.fillStyle = "rgba(31,119,180,0.35)"; ctx.fill(); ctx.strokeStyle = "#1f4e79"; ctx.lineWidth = 2; ctx.stroke();
-    const cx = r.footprint.reduce((s, p) => s + p[0], 0) / r.footprint.length, cy = r.footprint.reduce((s, p) => s + p[1], 0) / r.footprint.length;
+    const cx = points.reduce((s, p) => s + p[0], 0) / points.length, cy = points.reduce((s, p) => s + p[1], 0) / points.length;
     ctx.fillStyle = "#1f4e79"; ctx.font = "bold 12px sans-serif"; ctx.fillText(r.name, px(cx) + 8, py(cy) - 8);
   }
 }
