@@ -96,6 +96,21 @@ def test_footprints_are_advertised_received_and_forgotten(ros_graph, broker, obs
         assert node.poll() is None, "a bridge died"
 
 
+def square_at(x):
+    """SQUARE with its left edge at x."""
+    return [[x + px - 1.0, py] for px, py in SQUARE]
+
+
+def driver_and_listener(ros_graph, observer, wait_for, driver_params, listener_params):
+    """robot_0's bridge, which advertises, and robot_1's, which only listens, 8 m away; the probe of both."""
+    ros_graph.bridge("robot_0", *driver_params)
+    ros_graph.bridge("robot_1", *listener_params, "advertise_footprint:=false")
+    probe = ros_graph.probe("robot_0", "robot_1")
+    wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
+    probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY})
+    return probe
+
+
 def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_graph, broker, observer, wait_for):
     """A peer's layer excludes a driving robot where its last advert put it: a heartbeat-old pose has moved
     on, and the laser marks the robot's front, which the peer then shares as an obstacle (seen in the fleet
@@ -105,14 +120,7 @@ def test_a_driving_robot_is_advertised_as_it_moves_and_passed_on_at_once(ros_gra
     params = ["broker_url:=" + broker.url, "footprint_rate:=0.5", "robot_timeout:=5.0", "footprint_driving_interval:=0.0"]
     # near_distance 0: every advert precise. robot_1 advertises nothing, so with the default robot_0 would know no
     # robot near it and advertise every footprint_far_move only (test_footprint_adverts.py covers that)
-    ros_graph.bridge("robot_0", *params, "footprint_near_distance:=0.0")
-    ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
-    probe = ros_graph.probe("robot_0", "robot_1")
-    wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
-    probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY})
-
-    def square_at(x):
-        return [[x + px - 1.0, py] for px, py in SQUARE]
+    probe = driver_and_listener(ros_graph, observer, wait_for, params + ["footprint_near_distance:=0.0"], params)
 
     # Standing: the first advert is the heartbeat.
     def standing():
@@ -152,14 +160,7 @@ def test_a_driving_robots_dead_reckoned_adverts_are_moved_on_by_the_peer(ros_gra
     and advertises rarely; the peer's bridge moves its footprint on between adverts, on fleet_robots for the layer.
     Outcomes only: the footprints go out at the probe's pace, whatever the load makes of it."""
     params = ["broker_url:=" + broker.url, "robot_timeout:=5.0", "footprint_near_distance:=0.0"]
-    ros_graph.bridge("robot_0", *params)
-    ros_graph.bridge("robot_1", *params, "advertise_footprint:=false")
-    probe = ros_graph.probe("robot_0", "robot_1")
-    wait_for(lambda: len(observer.on("ADV:Identity/")) >= 2, timeout=15, what="bridges online")
-    probe.send({"cmd": "footprint", "robot": "robot_1", "frame_id": "map", "points": AWAY})
-
-    def square_at(x):
-        return [[x + px - 1.0, py] for px, py in SQUARE]
+    probe = driver_and_listener(ros_graph, observer, wait_for, params, params)
     wait_for(lambda: probe.send({"cmd": "footprint", "robot": "robot_0", "frame_id": "map", "points": square_at(1.0)})
              or robot_0_adverts(observer), timeout=15, what="robot_0's first advert")
     wait_fleet(probe, "robot_1", lambda robots: robots, wait_for, what="robot_1 knows robot_0")
