@@ -1,4 +1,4 @@
-"""bench_fleet_scale's measuring on the wire and its driving robots (no ROS).
+"""bench_fleet_scale's measuring on the wire (no ROS).
 
 Bytes on the wire, two ways that must agree:
 - per robot: every byte its MQTT connection writes to or reads from its TCP socket (paho's
@@ -6,9 +6,6 @@ Bytes on the wire, two ways that must agree:
   PINGREQ/PINGRESP, SUBSCRIBE/UNSUBSCRIBE, CONNECT; all but TCP/IP's own headers;
 - per broker: mosquitto's ``$SYS/broker/bytes/received`` and ``.../sent`` (every byte it read and wrote,
   bridge connections and this watcher's own $SYS messages included), published every ``sys_interval``.
-
-Driving robots: the node's footprint topic (move_base's global costmap, 5 Hz) and its AdvertSchedule,
-on a robot that drives back and forth along an aisle at ``speed``.
 """
 import math
 import os
@@ -88,14 +85,6 @@ def broker_bytes_per_minute(watchers, start, end):
     return (total / span * 60.0 if span > 0 else float("nan")), span
 
 
-def aisle_position(start_x, aisle_y, speed, t, x_min=1.0, x_max=95.0):
-    """Where a robot that left ``start_x`` at t = 0 is after ``t`` s, driving back and forth between
-    x_min and x_max at ``speed`` along y = aisle_y (first towards x_max)."""
-    span = x_max - x_min
-    travelled = (start_x - x_min + speed * t) % (2 * span)
-    return (x_min + travelled if travelled <= span else x_max - (travelled - span)), aisle_y
-
-
 def rss_mb():
     with open("/proc/self/status") as f:
         for line in f:
@@ -115,11 +104,6 @@ def percentile(values, q):
     if not values:
         return float("nan")
     return values[min(len(values) - 1, int(math.ceil(q * len(values))) - 1)]
-
-
-def is_driving(index, fraction):
-    """Whether robot ``index`` drives: ``fraction`` of the robots, spread evenly over the indexes."""
-    return int((index + 1) * fraction) > int(index * fraction)
 
 
 def message_kind(topic):
