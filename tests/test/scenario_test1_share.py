@@ -33,7 +33,7 @@ class Test1Share(FleetTestCase):
         blocked = {name: fleet.corridor(b["corridor"]) for name, b in blocks.items()}
         obstacle_range = float(rospy.get_param("/robot_0/move_base/global_costmap/obstacle_range", 2.5))
 
-        self.assert_succeeded(r1, "wait_1", r1.go("wait_1", 120.0))
+        self.place(r1, "wait_1", 120.0)
         fleet.wait_until(lambda: "robot_1" in r0.fleet_robot_names(), 20.0, "robot_0's bridge to hear robot_1")
         # robot_0 watched robot_1 drive past it into the right corridor: its obstacle layer keeps the cells robot_1
         # crossed where no later beam passed through them, and on a loaded machine (fewer scans) enough of them that

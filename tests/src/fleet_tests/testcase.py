@@ -35,5 +35,15 @@ class FleetTestCase(unittest.TestCase):
         self.assertTrue(finished and state == "SUCCEEDED", "%s did not reach %s: %s %s; %s"
                         % (robot.name, goal, state, text, self.pictures(picture_name or robot.name)))
 
+    def place(self, robot, goal, timeout):
+        """Drives ``robot`` to ``goal`` to set a scene up: a second try when move_base gives up on the way (its controller
+        finds no valid control on a starved machine: seen at load 6.8 on robot_1's way to wait_1, 0.6 m short). Where a
+        robot stands before the test begins is not what the test is of; what it then does is, and is asserted."""
+        result = robot.go(goal, timeout)
+        if not (result[0] and result[1] == "SUCCEEDED"):
+            rospy.logwarn("%s: %s not reached (%s %s); sending it again", robot.name, goal, result[1], result[2])
+            result = robot.go(goal, timeout)
+        self.assert_succeeded(robot, goal, result)
+
     def reach(self, robot, goal):
         self.assert_succeeded(robot, goal, robot.go(goal, self.GOAL_TIMEOUT), robot.name + "_" + goal)
