@@ -96,6 +96,25 @@ def test_without_extrapolating_receivers_the_view_would_lag_a_whole_interval():
     assert fp.largest_move(held.points_at(1.9), placed(0.3 + 0.65 * 1.9, 0.3, 0.0)) < 1e-9
 
 
+def test_far_from_every_robot_a_straight_drive_costs_a_far_heartbeat_and_the_view_lags_by_far_move():
+    """Far adverts are dead-reckoned too: along a straight aisle a far driver beat every far_move (1 m: every 1.5 s at
+    0.65 m/s), more often than a near one with dead reckoning; now every FAR_INTERVAL (10 s), and a turn or a stop at
+    once. What a peer believes lags by at most far_move plus one footprint's travel."""
+    def far_simulate(driving_interval):
+        s = schedule(driving_interval, far_move=1.0)
+        on_footprint, on_tick = s.on_footprint, s.on_tick
+        s.on_footprint = lambda points, now, near=True: on_footprint(points, now, False)
+        s.on_tick = lambda points, now, near=True: on_tick(points, now, False)
+        return simulate(s, drive_turn_stop, 40.0)
+    dead_reckoned, _, after = far_simulate(INTERVAL)
+    every_metre, _, _ = far_simulate(0.0)
+    driving = [a for a in dead_reckoned if 1.0 <= a[0] <= 22.0]
+    assert after < 1.0, after
+    assert len([a for a in every_metre if 1.0 <= a[0] <= 22.0]) >= 12
+    assert len(driving) <= 6, "%d far adverts over 21 s of driving: %s" % (len(driving), driving)
+    assert all(v == fp.PARKED_VALIDITY * fp.FAR_INTERVAL for _, v, _ in driving)
+
+
 def test_a_stop_is_advertised_within_one_min_move_and_then_the_robot_parks():
     sent, _, after = simulate(schedule(), drive_turn_stop, 40.0)
     assert after < MIN_MOVE

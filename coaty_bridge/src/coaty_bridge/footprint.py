@@ -348,9 +348,10 @@ class AdvertSchedule:
       peers keep the robot between them (``validFor`` on the wire; older receivers use their own
       robot_timeout, and forget a parked robot between adverts).
     - far (the caller passes ``near=False``: no known peer within its near distance), driving: at once only
-      when a vertex moved ``far_move``, and otherwise every FAR_INTERVAL s, each advert valid for
-      PARKED_VALIDITY times that. No peer's sensors reach the robot, so no peer needs its pose within
-      ``min_move``; the first footprint that is near again sends at once (it moved ``min_move`` since).
+      when a vertex moved ``far_move`` (with dead reckoning: is ``far_move`` off what the peers believe, the
+      advert stating the velocity), and otherwise every FAR_INTERVAL s, each advert valid for PARKED_VALIDITY
+      times that. No peer's sensors reach the robot, so no peer needs its pose within ``min_move``; the first
+      footprint that is near again sends at once when it is ``min_move`` off what the peers believe.
     ``parked_interval`` 0 (or ``min_move`` 0: motion is not watched) keeps the rate at all times;
     ``far_move`` 0 makes every robot near; ``driving_interval`` 0 sends every ``min_move`` (no velocity).
     Pure: the caller passes the time and sends what it is told (the validFor returned, and
@@ -404,10 +405,10 @@ class AdvertSchedule:
 
     def believed(self, now):
         """The footprint the peers believe this robot has at ``now``: the last advert, moved on at its velocity
-        for at most driving_interval s (as HeardRobot.points_at does); None before any advert."""
-        if self._last_points is None or self._last_velocity == (0.0, 0.0):
+        for at most its validFor / PARKED_VALIDITY s (as HeardRobot.points_at does); None before any advert."""
+        if self._last_points is None or self._last_velocity == (0.0, 0.0) or self._last_valid_for <= 0:
             return self._last_points
-        dt = min(max(now - self._last_time, 0.0), self.driving_interval)
+        dt = min(max(now - self._last_time, 0.0), self._last_valid_for / PARKED_VALIDITY)
         return shifted(self._last_points, self._last_velocity[0] * dt, self._last_velocity[1] * dt)
 
     def _area_changed(self, points):
@@ -422,6 +423,12 @@ class AdvertSchedule:
     def advert_velocity(self):
         """The velocity the advert just decided states ((0, 0) unless dead-reckoned)."""
         return self.decision[1]
+
+    def _far_advert(self):
+        """The advert of a robot that drives far from every known robot: every far_move off (dead-reckoned: off what
+        the peers believe), or every FAR_INTERVAL s."""
+        return self._decide("far", PARKED_VALIDITY * FAR_INTERVAL,
+                            self._velocity if self._dead_reckoning() else (0.0, 0.0))
 
     def _moving_advert(self):
         """The advert of a robot that moves near others: dead-reckoned, or precise."""
@@ -438,7 +445,7 @@ class AdvertSchedule:
             return None
         moved = largest_move(self.believed(now), points)
         if self._far(near):
-            return self._decide("far", PARKED_VALIDITY * FAR_INTERVAL) if moved >= self.far_move else None
+            return self._far_advert() if moved >= self.far_move else None
         if moved >= self.min_move or (self._dead_reckoning() and self._area_changed(points)):
             self._last_motion = now
             return self._moving_advert()
@@ -456,7 +463,7 @@ class AdvertSchedule:
             if self._last_time is None:
                 return self._decide("precise", 0.0)    # the first: nothing known of its motion yet
             if far:
-                return self._decide("far", PARKED_VALIDITY * FAR_INTERVAL)
+                return self._far_advert()
             return self._moving_advert()
         since = now - self._last_time
         parked = self.parked_interval > 0 and self.min_move > 0 and now - self._last_motion >= self.parked_after
@@ -464,9 +471,12 @@ class AdvertSchedule:
             # the heartbeat, skipped when a motion advert went out since the previous tick
             interval = self.driving_interval if self._dead_reckoning() else 1.0 / self.rate
             return self._moving_advert() if not 0.0 <= since < interval - 0.25 / self.rate else None
-        kind, interval = ("parked", self.parked_interval) if parked else ("far", FAR_INTERVAL)
-        if self._last_kind != kind or not 0.0 <= since < interval:
-            return self._decide(kind, PARKED_VALIDITY * interval)
+        if parked:
+            if self._last_kind != "parked" or not 0.0 <= since < self.parked_interval:
+                return self._decide("parked", PARKED_VALIDITY * self.parked_interval)
+            return None
+        if self._last_kind != "far" or not 0.0 <= since < FAR_INTERVAL:
+            return self._far_advert()
         return None
 
     @property
