@@ -105,3 +105,18 @@ def test_when_rospy_itself_fails_the_buffer_is_repaired_and_the_next_message_arr
     repaired = _probe(ros_env, "--no-precheck")
     assert repaired["received"] == [100, 300], repaired
     assert repaired["counted"] == {PUBLISH_FAILED: 1} and repaired["repaired"] == 1
+
+
+def test_a_publish_that_fails_while_the_node_shuts_down_is_no_error(caplog):
+    """rospy closes a node's topics before is_shutdown() turns true: a peer's message arriving then is nobody's loss."""
+    closing = [False]
+    made = []
+    safe = SafePublisher(lambda: made.append(FakePublisher(fail_times=2)) or made[-1], topic="robot_0/from_fleet",
+                         shutting_down=lambda: closing[0])
+    with caplog.at_level(logging.INFO, logger="sharing_msgs"):
+        assert not safe.publish(FakeMsg("lost"), "obstacle u1 v2")        # a real failure: counted, ERROR
+        closing[0] = True
+        assert not safe.publish(FakeMsg("late"), "obstacle u1 v3")        # at shutdown: INFO only
+    assert safe.errors == {PUBLISH_FAILED: 1} and safe.not_delivered_at_shutdown == 1
+    levels = [(r.levelname, "u1 v3" in r.getMessage()) for r in caplog.records if r.name.startswith("sharing_msgs")]
+    assert ("ERROR", False) in levels and ("INFO", True) in levels and ("ERROR", True) not in levels

@@ -186,6 +186,11 @@ def fleet_robots_message(heard, now, timeout):
 MOVING_PEERS_RATE = 10.0
 
 
+def node_shutting_down():
+    """Whether this node is closing: rospy closes its topics before is_shutdown() turns true."""
+    return rospy.is_shutdown() or rospy.core.is_shutdown_requested()
+
+
 def default_robot_name():
     return rospy.get_namespace().strip("/").replace("/", "_")
 
@@ -274,12 +279,12 @@ class BridgeNode:
         # A message that cannot be delivered is dropped there; the publisher stays usable.
         self.from_fleet = SafePublisher(
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
-            topic="%s/from_fleet" % config.robot_name)
+            topic="%s/from_fleet" % config.robot_name, shutting_down=node_shutting_down)
         # Resolves answering our Discover restore state: the handler never takes them as a renewal (issue 43)
         self.fleet_state = SafePublisher(
             lambda: rospy.Publisher("fleet_state", SharedObstacle, queue_size=1000,
                                     subscriber_listener=_OnNewSubscriber(self._on_restarted_handler)),
-            topic="%s/fleet_state" % config.robot_name)
+            topic="%s/fleet_state" % config.robot_name, shutting_down=node_shutting_down)
         self._started = False
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint,
@@ -421,7 +426,7 @@ class BridgeNode:
             # While the launch shuts down, peers' bridges withdraw their footprints as rospy closes our topics
             # (/rosout and fleet_robots, before is_shutdown() turns true): nobody is left to tell, so that is no
             # error. Any other time it is one.
-            if not (rospy.is_shutdown() or rospy.core.is_shutdown_requested()):
+            if not node_shutting_down():
                 raise
 
     def _footprint_tick(self, _event=None):

@@ -32,6 +32,12 @@ from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rec
 UNSENT_KEPT = 1000
 
 
+
+def _shutting_down():
+    """Whether this node is closing: rospy closes its topics before is_shutdown() turns true."""
+    return rospy.is_shutdown() or rospy.core.is_shutdown_requested()
+
+
 class _OnNewSubscriber(rospy.SubscribeListener):
     """Calls ``callback(publish_single)`` whenever a subscriber connects to the publisher."""
 
@@ -144,7 +150,8 @@ class HandlerNode:
         self._pub_layer = SafePublisher(
             lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100,
                                     subscriber_listener=_OnNewSubscriber(self._on_new_layer)),
-            topic="%s/shared_obstacles" % params.robot_name)
+            topic="%s/shared_obstacles" % params.robot_name,
+            shutting_down=_shutting_down)
         self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
         # What goes to the fleet while no bridge listens (it crashed and is starting again: issue 43, item 8) is kept,
         # and handed to the bridge when it subscribes, deadlines aged: nothing this robot shares is lost that way.
@@ -152,7 +159,8 @@ class HandlerNode:
         self._pub_fleet = SafePublisher(
             lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000,
                                     subscriber_listener=_OnNewSubscriber(self._on_new_bridge)),
-            topic="%s/to_fleet" % params.robot_name)
+            topic="%s/to_fleet" % params.robot_name,
+            shutting_down=_shutting_down)
         self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
                                          latch=True)
         self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)

@@ -56,9 +56,11 @@ class SafePublisher:
     ``errors`` counts drops by reason; ``consecutive_errors`` resets on every success;
     ``repaired`` counts buffers emptied after a failed publish, ``recreated`` replaced
     publishers. ``precheck=False`` skips the scratch serialisation (tests use it to exercise
-    the repair path)."""
+    the repair path). ``shutting_down`` (the node passes rospy's shutdown state) tells a publish
+    that fails because the node is closing its topics from a real failure: that one is logged at
+    INFO, not counted, and the publisher left alone (nobody is left to deliver to)."""
 
-    def __init__(self, factory, topic="?", precheck=True):
+    def __init__(self, factory, topic="?", precheck=True, shutting_down=lambda: False):
         self._factory = factory
         self._topic = topic
         self._lock = threading.Lock()
@@ -69,7 +71,9 @@ class SafePublisher:
         self.recreated = 0
         self.repaired = 0
         self._precheck = precheck
+        self._shutting_down = shutting_down
         self._reported = 0
+        self.not_delivered_at_shutdown = 0
 
     @property
     def publisher(self):
@@ -90,6 +94,12 @@ class SafePublisher:
         try:
             publisher.publish(msg)
         except Exception as err:  # noqa: BLE001 - whatever broke, the next message must go out
+            if self._shutting_down():
+                with self._lock:
+                    self.not_delivered_at_shutdown += 1
+                _log.info("%s not delivered on %s: the node is shutting down (%s)", what or type(msg).__name__,
+                          self._topic, type(err).__name__)
+                return False
             self._failed(PUBLISH_FAILED, msg, what, err)
             if _discard_partial_bytes(publisher):
                 with self._lock:
