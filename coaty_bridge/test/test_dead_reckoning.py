@@ -210,7 +210,7 @@ def test_a_dead_reckoned_advert_is_evidence_for_its_stamp_only():
 ])
 def test_the_node_checks_the_driving_interval(interval, error):
     """(and its default is the one the scale bench runs with)"""
-    from coaty_bridge.node import FootprintConfig
+    from coaty_bridge.footprint_config import FootprintConfig
     assert FootprintConfig().driving_interval == fp.DEFAULT_DRIVING_INTERVAL
     if error is None:
         assert FootprintConfig(driving_interval=interval).schedule(10.0).driving_interval == interval

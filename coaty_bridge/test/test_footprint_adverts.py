@@ -223,7 +223,7 @@ def test_near_distance_just_inside_and_just_outside():
     (dict(far_move=0.05, near_distance=0.0), None),
 ])
 def test_the_node_checks_near_distance_and_far_move(kwargs, error):
-    from coaty_bridge.node import FootprintConfig
+    from coaty_bridge.footprint_config import FootprintConfig
     if error is None:
         config = FootprintConfig(**kwargs)
         assert config.schedule().far_move == (config.far_move if config.near_distance > 0 else 0.0)
