@@ -50,6 +50,11 @@ KNOWN_UPSTREAM = [
     # its path ends where it stopped), mostly in the run without sharing, where robots meet the blocks.
     (re.compile(r"\[ERROR\] \[[\d.]+, [\d.]+\]: Aborting because a valid control could not be found\. Even after "
                 r"executing all recovery behaviors"), "move_base gave up on a goal (shown in the comparison)"),
+    # rotate_recovery, one of move_base's default recovery behaviours, declines to turn a robot pressed against
+    # something and says so at ERROR; move_base goes on to its next recovery. Seen in the run without sharing, where a
+    # robot met block_right (the comparison counts its recoveries).
+    (re.compile(r"\[ERROR\] \[[\d.]+, [\d.]+\]: Rotate recovery can't rotate in place because there is a potential "
+                r"collision\. Cost: "), "move_base's rotate recovery declined to turn (a recovery the comparison counts)"),
 ]
 
 

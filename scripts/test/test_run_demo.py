@@ -83,3 +83,14 @@ def test_move_base_giving_up_is_counted_as_upstreams_not_failed_on(tmp_path):
     assert demo.upstream_lines(abort) == {"move_base gave up on a goal (shown in the comparison)": 1}
     ours = "[ERROR] [1795916477.316450, 99.100000]: robot_0: could not withdraw the footprint of robot_2\n"
     assert demo.error_lines(abort + ours) == [ours.strip()]
+
+
+def test_rotate_recovery_declining_to_turn_is_counted_as_upstreams_not_failed_on():
+    """Seen in the run without sharing (robot_2 against block_right): move_base goes on to its next recovery."""
+    declined = ("\x1b[31m[ERROR] [1795930358.923550183, 44.100000000]: Rotate recovery can't rotate in place because "
+                "there is a potential collision. Cost: -1.00\x1b[0m\n")
+    assert demo.error_lines(declined) == []
+    assert demo.upstream_lines(declined) == {
+        "move_base's rotate recovery declined to turn (a recovery the comparison counts)": 1}
+    # another rotate_recovery ERROR is not exempt
+    assert demo.error_lines(declined.replace("Rotate recovery can't rotate in place", "Rotate recovery crashed"))
