@@ -142,12 +142,8 @@ def check_evidence(value):
     NonFiniteNumberError or OutOfRangeError naming the bad value."""
     if not isinstance(value, (list, tuple)) or len(value) != 5:
         raise WrongTypeError("evidence %s is not [stamp, x, y, radius, reach]" % _short(value))
-    names = ("stamp", "x", "y", "radius", "reach")
-    for name, v in zip(names, value):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise WrongTypeError("evidence %s %s is not a number" % (name, _short(v)))
-        if not math.isfinite(v):
-            raise NonFiniteNumberError("evidence %s %r is not finite" % (name, v))
+    for name, v in zip(("stamp", "x", "y", "radius", "reach"), value):
+        _check_float("evidence " + name, v)
     stamp, x, y, radius, reach = (float(v) for v in value)
     for name, v, low, high in (("stamp", stamp, 0.0, float(MAX_UINT32)), ("x", x, -1.0e6, 1.0e6),
                                ("y", y, -1.0e6, 1.0e6), ("radius", radius, 0.0, MAX_EVIDENCE_RADIUS),

@@ -63,6 +63,7 @@ PARKED_VALIDITY = 2.5
 #: s between a far driving robot's adverts when it moves less than far_move (AdvertSchedule)
 FAR_INTERVAL = 10.0
 #: Longest sensor reach an advert may state, m (a receiver caps it further: max_sensor_reach).
+MAX_REACH = 1000.0
 #: Fastest velocity an advert may state, m/s: a warehouse robot, with room to spare.
 MAX_SPEED = 20.0
 #: s of own footprints a driving robot's velocity is estimated over (move_base's footprint topic at 5 Hz:
@@ -70,7 +71,6 @@ MAX_SPEED = 20.0
 VELOCITY_SPAN = 0.4
 #: s between a driving robot's dead-reckoned adverts when nothing else sends one (footprint_driving_interval)
 DEFAULT_DRIVING_INTERVAL = 2.0
-MAX_REACH = 1000.0
 #: footprint_area_size bounds, m (0 is allowed too: no areas).
 MIN_AREA_SIZE = 1.0
 MAX_AREA_SIZE = 10000.0
@@ -242,11 +242,21 @@ class HeardRobot:
         moved on at its velocity since it was heard, for at most the sender's advert interval (validFor /
         PARKED_VALIDITY; a lost advert then leaves the robot where that brought it, not driving on for ever)."""
         footprint = self.footprint
-        if not footprint.moving:
-            return footprint.points
-        dt = min(max(now - self.heard_at, 0.0), footprint.valid_for / PARKED_VALIDITY)
-        vx, vy = footprint.velocity
-        return tuple((x + vx * dt, y + vy * dt) for x, y in footprint.points)
+        return dead_reckoned(footprint.points, footprint.velocity, footprint.valid_for, now - self.heard_at)
+
+
+def shifted(points, dx, dy):
+    return tuple((x + dx, y + dy) for x, y in points)
+
+
+def dead_reckoned(points, velocity, valid_for, elapsed):
+    """``points`` of an advert with ``velocity`` and ``valid_for``, ``elapsed`` s after it went out: moved on at the
+    velocity for at most valid_for / PARKED_VALIDITY s (the sender's advert interval), never back. The one rule of
+    both sides: receivers (HeardRobot.points_at) and the sender judging what they believe (AdvertSchedule.believed)."""
+    if valid_for <= 0 or velocity == (0.0, 0.0):
+        return points
+    dt = min(max(elapsed, 0.0), valid_for / PARKED_VALIDITY)
+    return shifted(points, velocity[0] * dt, velocity[1] * dt)
 
 
 def extent(points):
@@ -329,10 +339,6 @@ def largest_move(a, b):
     return max(math.hypot(q[0] - p[0], q[1] - p[1]) for p, q in zip(a, b))
 
 
-def shifted(points, dx, dy):
-    return tuple((x + dx, y + dy) for x, y in points)
-
-
 class AdvertSchedule:
     """When this robot advertises its footprint (issue 29: adverts were 40 % of the fleet's bytes).
 
@@ -399,17 +405,16 @@ class AdvertSchedule:
         if now - then < 0.5 * VELOCITY_SPAN:
             return (0.0, 0.0)
         vx, vy = ((here[0] - there[0]) / (now - then), (here[1] - there[1]) / (now - then))
-        if math.hypot(vx, vy) < self.min_move / self.driving_interval or math.hypot(vx, vy) > MAX_SPEED:
+        if not self.min_move / self.driving_interval <= math.hypot(vx, vy) <= MAX_SPEED:
             return (0.0, 0.0)
         return (vx, vy)
 
     def believed(self, now):
         """The footprint the peers believe this robot has at ``now``: the last advert, moved on at its velocity
         for at most its validFor / PARKED_VALIDITY s (as HeardRobot.points_at does); None before any advert."""
-        if self._last_points is None or self._last_velocity == (0.0, 0.0) or self._last_valid_for <= 0:
-            return self._last_points
-        dt = min(max(now - self._last_time, 0.0), self._last_valid_for / PARKED_VALIDITY)
-        return shifted(self._last_points, self._last_velocity[0] * dt, self._last_velocity[1] * dt)
+        if self._last_points is None:
+            return None
+        return dead_reckoned(self._last_points, self._last_velocity, self._last_valid_for, now - self._last_time)
 
     def _area_changed(self, points):
         return self.area_size > 0 and self._last_points is not None and \
