@@ -182,6 +182,19 @@ def test_a_bad_velocity_is_refused_by_name(velocity, error):
             fp.footprint_from_object(obj)
 
 
+def test_after_an_advert_with_a_bad_velocity_the_next_good_one_is_taken():
+    clock = [10.0]
+    table = fp.FleetRobotTable("robot_1", 3.0, lambda: clock[0])
+    obj = fp.footprint_to_object(fp.RobotFootprint(robot="robot_0", stamp=10.0, frame_id="map", points=SQUARE,
+                                                   valid_for=5.0, velocity=(0.5, 0.0)),
+                                 "8d6a3c3e-9c1e-4f7e-a5d4-2b1f0e9d8c7b")
+    bad = dict(obj, velocity=[25.0, 0.0])
+    with pytest.raises(fp.OutOfRangeError):
+        table.heard(fp.footprint_from_object(bad))
+    assert table.robots() == []
+    assert table.heard(fp.footprint_from_object(obj)) and table.robots()[0].footprint.velocity == (0.5, 0.0)
+
+
 def test_velocity_is_on_the_wire_only_in_a_dead_reckoned_advert():
     base = dict(robot="robot_0", stamp=1.0, frame_id="map", points=SQUARE)
     oid = "8d6a3c3e-9c1e-4f7e-a5d4-2b1f0e9d8c7b"

@@ -90,6 +90,9 @@ def test_bad_evidence_is_a_bad_payload_named_by_its_field(receiver, make_update,
     payload = message(make_update, 1.0, evidence)
     deliver(client, payload.replace(b"999.125", b"NaN") if nan else payload)
     assert got == [] and client.counters().get("dropped." + error) == 1, client.counters()
+    # the bad one cost nothing else: the same sender's next, good message is taken
+    deliver(client, message(make_update, 1.0, [STAMP, 1.0, 3.0, 0.3, REACH]))
+    assert len(got) == 1, client.counters()
 
 
 def test_the_largest_values_evidence_may_state_pass_the_codec():
