@@ -25,6 +25,9 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from flaky_run import failure_reason  # noqa: E402 - the one reading of a JUnit failure's text
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "test_results")
 DEVEL = os.path.join(ROOT, "catkin_ws", "devel")
@@ -33,6 +36,15 @@ PACKAGES = ["sharing_msgs", "sharing_layer_cpp", "sharing_handler_py", "coaty_br
             "fleet_sim", "fleet_nav", "sharing_replay", "vda5050_bridge", "fleet_console", "launch", "tests"]
 # pytest folders that are not packages: the repository's own tools.
 TOOL_TEST_FOLDERS = ["scripts", "upstream"]
+
+
+def case_failure_reason(failure):
+    """Why one JUnit case failed: pytest's message attribute ("AssertionError: timed out waiting for ..."),
+    else the first line of rosunit's text."""
+    message = (failure.get("message") or "").strip()
+    if message:
+        return message.splitlines()[0][:400]
+    return failure_reason(failure.text)
 
 
 class Tally:
@@ -54,9 +66,12 @@ class Tally:
         for suite in suites:
             for case in suite.iter("testcase"):
                 name = "%s.%s" % (case.get("classname", ""), case.get("name", ""))
-                if case.find("failure") is not None or case.find("error") is not None:
+                failure = case.find("failure")
+                failure = failure if failure is not None else case.find("error")
+                if failure is not None:
+                    # the reason goes into the summary: CI keeps only the end of the log
                     self.failed += 1
-                    self.failures.append("%s: %s" % (label, name))
+                    self.failures.append("%s: %s: %s" % (label, name, case_failure_reason(failure)))
                 elif case.find("skipped") is not None:
                     self.skipped += 1
                 else:

@@ -149,3 +149,19 @@ def test_a_skip_is_counted_and_kept_as_junit(tmp_path):
     assert (tally.passed, tally.failed, tally.skipped) == (0, 0, 1)
     case = ET.parse(xml).getroot().find("testcase")
     assert "costmap_2d" in case.find("skipped").get("message")
+
+
+def test_a_failed_case_is_listed_with_its_reason(tmp_path):
+    """CI shows only the end of the log: the summary line of a failed case carries why it failed."""
+    xml = tmp_path / "pytest.xml"
+    xml.write_text('<testsuites><testsuite name="s" tests="3">'
+                   '<testcase classname="test.test_a" name="test_x"><failure message="AssertionError: timed out '
+                   'waiting for the area&#10;assert False">trace</failure></testcase>'
+                   '<testcase classname="r" name="test_y"><error>Traceback (most recent call last):\n'
+                   '  File "x.py", line 3\nRuntimeError: no broker\n</error></testcase>'
+                   '<testcase classname="r" name="test_z"/></testsuite></testsuites>')
+    tally = runner.Tally()
+    tally.add_junit(str(xml), "pytest pkg")
+    assert (tally.passed, tally.failed) == (1, 2)
+    assert tally.failures == ["pytest pkg: test.test_a.test_x: AssertionError: timed out waiting for the area",
+                              "pytest pkg: r.test_y: no broker"]
