@@ -43,7 +43,7 @@ def _missing():
     return None
 
 
-def wait_until(predicate, what, timeout=30.0):
+def wait_until(predicate, what, timeout=60.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         value = predicate()
