@@ -117,7 +117,7 @@ def message_kind(topic):
             return "footprint" if ".area_" in event else "evidence"
         return "obstacle"
     if event.startswith("CHN:"):
-        for kind in ("heartbeat", "echo"):   # peers' heartbeats; the own echo (liveness.py)
+        for kind in ("heartbeat", "echo", "catchup"):   # peers' heartbeats; the own echo (liveness.py); catchup.py
             if kind in event.lower():
                 return kind
         return "channel"

@@ -57,7 +57,7 @@ def test_monitoring_updates_reach_the_robots_around_the_obstacle_and_first_share
     # the far robot drives next to the obstacle: it asks the areas it enters for what it missed
     far.note_own_position((5.0, 15.0))
     wait_for(lambda: 2 in versions(far, first.uuid), what="the far robot gets v2 on entering the area")
-    assert far.counters()["obstacle_area_discovers"] == 1
+    assert far.counters()["obstacle_area_catchups"] == 1
     assert not [k for c in (source, near, far) for k in c.counters() if k.startswith("dropped.")]
 
 

@@ -24,6 +24,7 @@ from coaty_bridge.config import (BridgeConfig, BrokerAddress, BrokerUrlChoice, c
                                  parse_broker_url)
 from coaty_bridge.connection import (FIRST_UNREACHABLE_WARN_AFTER, ConnectionMixin, _make_paho_client,  # noqa: F401
                                      mqtt_client_id)
+from coaty_bridge.catchup import CatchUpMixin
 from coaty_bridge.evidence import EvidenceMixin
 from coaty_bridge.discovery import (RESOLVE_BATCH, RESOLVE_BATCH_BYTES, _MAX_DISCOVER_REQUESTERS,  # noqa: F401
                                     DiscoveryMixin)
@@ -40,7 +41,8 @@ LOG = logging.getLogger(__name__)
 OWN_FOOTPRINTS_KEPT = 128
 
 
-class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, IncomingMixin, DiscoveryMixin, EvidenceMixin):
+class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, IncomingMixin, DiscoveryMixin, CatchUpMixin,
+                        EvidenceMixin):
     """One Coaty agent per robot. ``on_obstacle(update, topic)`` is called from the
     MQTT thread for every valid external obstacle event; ``clock`` is injectable."""
 
@@ -142,6 +144,10 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         # a robot without a known position (no footprint yet, a host without one) misses no update.
         self._area_subscriptions = {subscription(ns, "+")} if config.obstacle_area_size > 0 else set()
         self._obstacle_areas = set()
+        # Obstacle areas holding own updates: their catch-up requests are observed (catchup.py); and each
+        # requester's last request, requester -> (correlation id, its areas answered)
+        self._catchup_areas = set()
+        self._catchup_last = {}
         # Obstacle areas (issue 29): uuid -> clock time at which the copies of robots that hear only
         # fleet-wide messages expire (the newest fleet-wide message's deadline), and this robot's pending
         # renewals, uuid -> (due, update, sent_at): its last area-scoped update, sent fleet-wide before

@@ -271,7 +271,8 @@ class ConnectionMixin:
             except OSError:
                 pass
         with self._lock:
-            topics = self._subscriptions + [(t, self._qos) for t in sorted(self._area_subscriptions)]
+            topics = self._subscriptions + [(t, self._qos) for t in sorted(self._area_subscriptions)] + \
+                [(t, self._qos) for t in self._catchup_topics()]
             _, self._connect_subscribe_mid = client.subscribe(topics)
             self._subscribed = False
             self._connected = True

@@ -45,6 +45,15 @@ class DiscoveryMixin:
         return self._replayable_own_updates()
 
     def _discover_obstacles(self, object_types=None):
+        correlation_id = self._expect_resolves()
+        topic = Topic(self.config.namespace, "DSC", self.identity_id, correlation_id=correlation_id)
+        self._send(str(topic), codec.discover_object_types_payload(object_types or [self.config.object_type]),
+                   queue=False)
+        self._count("discovers_sent")
+
+    def _expect_resolves(self):
+        """A new correlation id whose Resolves this client takes for discover_window s (a Discover's, or an area
+        catch-up's: catchup.py)."""
         correlation_id = new_uuid()
         now = self._clock()
         ns = self.config.namespace
@@ -60,10 +69,7 @@ class DiscoveryMixin:
             self._mqtt.subscribe(resolve_subscription(ns, correlation_id), self._qos)
             if ended:
                 self._mqtt.unsubscribe([resolve_subscription(ns, c) for c in ended])
-        topic = Topic(self.config.namespace, "DSC", self.identity_id, correlation_id=correlation_id)
-        self._send(str(topic), codec.discover_object_types_payload(object_types or [self.config.object_type]),
-                   queue=False)
-        self._count("discovers_sent")
+        return correlation_id
 
     def _resolve_obstacles(self, reply, updates):
         """Answers a Discover with these obstacles in as few Resolves (on ``reply``) as fit: up to

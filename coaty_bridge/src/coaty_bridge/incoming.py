@@ -6,7 +6,7 @@ import logging
 import select
 import time
 
-from coaty_bridge import areas, codec, footprint as footprints, logins, renewals
+from coaty_bridge import areas, catchup, codec, footprint as footprints, logins, renewals
 from coaty_bridge.errors import (CoatyError, FootprintTooLargeError, ForgedSourceError, ReservedSourceError,
                                  UnknownRobotError, WrongTypeError)
 from coaty_bridge.identity import identity_for
@@ -173,6 +173,8 @@ class IncomingMixin:
                 for update in batch.obstacles:
                     self._sent_fleet_wide(update)
                 self._deliver_batch(batch, topic, topic_text, payload)
+            elif topic.event == "CHN" and catchup.area_of_channel(topic.filter) is not None:
+                self._answer_catchup(topic, data)
             elif topic.event == "ADV" and topic.core_type == codec.IDENTITY_CORE_TYPE:
                 self._on_identity(topic, data)
             elif topic.event == "DAD":

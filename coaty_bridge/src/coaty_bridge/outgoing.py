@@ -47,6 +47,7 @@ class OutgoingMixin:
         self._count("published")
         self._count("bytes_published", len(payload))
         self._log_own(update)
+        self._observe_catchup_area(update)
         if area is None:
             self._count("published_fleet_wide")
             self._sent_fleet_wide(update)
@@ -200,8 +201,8 @@ class OutgoingMixin:
                     self._mqtt.unsubscribe(gone)
         if connected and new_obstacle_areas and not first:
             # the first position follows the connect's own Discover, which already asked for everything
-            self._discover_obstacles([areas.area_object_type(self.config.object_type, a) for a in new_obstacle_areas])
-            self._count("obstacle_area_discovers")
+            self._ask_areas(new_obstacle_areas)
+            self._count("obstacle_area_catchups")
 
     def withdraw_footprint(self):
         """Takes this robot's footprint back (a Deadvertise of its advert series): peers forget it now,

@@ -1,0 +1,174 @@
+"""Area catch-up (catchup.py): a robot entering obstacle areas asks each area on its own Channel, and only
+the robots holding their own updates there hear the request. As a Discover, every robot of the fleet
+received every driving robot's request. Real mosquitto, real clients."""
+import json
+import uuid as uuidlib
+
+import pytest
+
+from coaty_bridge import catchup, codec
+from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge.topics import Topic
+
+OT = codec.DEFAULT_OBJECT_TYPE
+# make_update's rectangle (1, 2)-(3.5, 4) and cell 880221: obstacle area (0, 0) at 10 m. Others (grid origin
+# (-10, -20), 0.05 m, 2000 cells a row), each with a cell inside: area (2, 0), area (4, 4)
+OTHER_AREA_RECT, OTHER_AREA_CELL = (25.0, 2.0, 26.0, 3.0), 445 * 2000 + 705
+FAR_AREA_RECT, FAR_AREA_CELL = (44.0, 44.0, 45.0, 45.0), 1285 * 2000 + 1085
+
+
+def versions(client, uuid):
+    return sorted({u.version for u in client.received_updates if u.uuid == uuid})
+
+
+def answered(observer, client, correlation_id="+"):
+    """(uuid, version) of every obstacle in the Resolves ``client`` sent (to one correlation id, or any)."""
+    found = []
+    for topic, payload in observer.on("/RSV/%s/" % client.identity_id):
+        if correlation_id in ("+", topic.rsplit("/", 1)[1]):
+            found += [(o["objectId"], o["version"]) for o in [payload["object"]] + payload.get("relatedObjects", [])]
+    return found
+
+
+def request(observer, area, correlation_id, sender):
+    observer.publish(str(Topic("fleet", "CHN", sender, filter=catchup.channel(area))),
+                     catchup.request_payload(correlation_id))
+
+
+@pytest.mark.broker
+def test_a_robot_entering_an_area_catches_up_from_the_robots_holding_updates_there_and_no_other_hears_it(
+        make_client, make_update, observer, wait_for):
+    source, far, bystander = make_client("robot_0"), make_client("robot_2"), make_client("robot_3")
+    wait_for(lambda: all(c.subscribed for c in (source, far, bystander)), what="all connected")
+    source.note_own_position((5.0, 5.0))
+    far.note_own_position((45.0, 5.0))
+    bystander.note_own_position((45.0, 45.0))
+    first = make_update(version=1)
+    assert source.publish_obstacle(first)
+    # the bystander holds an update of its own, far from where robot_2 goes: it observes that area only
+    assert bystander.publish_obstacle(make_update(source="robot_3", rectangle=FAR_AREA_RECT,
+                                                     marked=(FAR_AREA_CELL,), cleared=()))
+    wait_for(lambda: versions(far, first.uuid) == [1], what="the first share at the far robot")
+    second = make_update(uuid=first.uuid, version=2, marked=(880250,), cleared=())
+    assert source.publish_obstacle(second)   # to area (0, 0) only
+    far_id = far.identity_id
+    discovers_before = len([t for t, _ in observer.on("/DSC/") if far_id in t])
+
+    far.note_own_position((5.0, 15.0))        # 3 x 3 areas around (0, 1): nine new ones, (0, 0) among them
+    wait_for(lambda: len([t for t, _ in observer.on("CHN:" + catchup.CHANNEL) if far_id in t]) == 9,
+             what="a request to each of the nine areas")
+    # (v2 may also have reached it before its subscriptions moved: the answer itself is what shows the catch-up)
+    wait_for(lambda: (first.uuid, 2) in answered(observer, source), what="robot_0's answer with v2")
+    wait_for(lambda: 2 in versions(far, first.uuid), what="v2 at the robot that entered the area")
+    assert len([t for t, _ in observer.on("/DSC/") if far_id in t]) == discovers_before, \
+        "the catch-up went out as a fleet-wide Discover"
+    wait_for(lambda: source.counters().get("catchups_answered") == 1, what="robot_0 answered once")
+    assert far.counters()["catchup_requests_sent"] == 9
+    assert not [k for k in bystander.counters() if "catchup" in k], \
+        "a robot with no update in the areas asked heard the request: %s" % bystander.counters()
+    assert not [k for c in (source, far, bystander) for k in c.counters() if k.startswith("dropped.")]
+
+
+@pytest.mark.broker
+def test_a_robot_stops_observing_an_area_once_its_updates_there_have_expired(broker, make_update, observer,
+                                                                             wait_for):
+    now = [1000.0]
+    source = CoatyBridgeClient(BridgeConfig("robot_0", broker_url=broker.url), lambda u, t: None,
+                               clock=lambda: now[0])
+    source.start()
+    try:
+        wait_for(lambda: source.subscribed, what="subscribed")
+        source.note_own_position((5.0, 5.0))
+        assert source.publish_obstacle(make_update(version=1, deadline=20))                    # area (0, 0)
+        lasting = make_update(version=1, deadline=600, rectangle=OTHER_AREA_RECT,
+                                  marked=(OTHER_AREA_CELL,), cleared=())              # area (2, 0)
+        assert source.publish_obstacle(lasting)
+        now[0] = 1030.0                                                # the first one has expired everywhere
+        asker = str(uuidlib.uuid4())
+        c1, c2, c3 = (str(uuidlib.uuid4()) for _ in range(3))
+        wait_for(lambda: len(observer.on("CHN:" + catchup.channel((2, 0)))) == 0 and source.subscribed,
+                 what="nothing asked yet")
+        request(observer, (0, 0), c1, asker)
+        wait_for(lambda: source.counters().get("catchup_areas_left") == 1, what="area (0, 0) left")
+        # after it: a request for (0, 0) that must not reach it, then one for (2, 0) that must (in order)
+        request(observer, (0, 0), c2, asker)
+        request(observer, (2, 0), c3, asker)
+        wait_for(lambda: answered(observer, source, c3), what="the answer to c3")
+        assert answered(observer, source, c3) == [(lasting.uuid, 1)]
+        assert source.counters().get("catchup_areas_left") == 1, "still observing area (0, 0) after leaving it"
+        assert not observer.on("/RSV/%s/%s" % (source.identity_id, c1))
+        # the same request again: each area of one request is answered once
+        request(observer, (2, 0), c3, asker)
+        wait_for(lambda: source.counters().get("dropped.discover_rate_limited") == 1, what="the repeat dropped")
+        assert len(observer.on("/RSV/%s/%s" % (source.identity_id, c3))) == 1
+    finally:
+        source.stop(timeout=0.5)
+
+
+@pytest.mark.broker
+def test_bad_catch_up_requests_are_counted_and_dropped_and_a_good_one_is_still_answered(
+        make_client, make_update, observer, wait_for):
+    source = make_client("robot_0")
+    wait_for(lambda: source.subscribed, what="subscribed")
+    source.note_own_position((5.0, 5.0))
+    first = make_update(version=1)
+    assert source.publish_obstacle(first)
+    asker = str(uuidlib.uuid4())
+    topic = str(Topic("fleet", "CHN", asker, filter=catchup.channel((0, 0))))
+    wait_for(lambda: observer.on(catchup.CHANNEL) == [] and source.counters().get("published_fleet_wide") == 1,
+             what="published")
+    bad = [{"object": {"objectType": catchup.OBJECT_TYPE, "coreType": "CoatyObject", "objectId": "not-a-uuid",
+                       "name": "x"}},
+           {"object": {"objectType": "org.fleetsharing.Other", "coreType": "CoatyObject",
+                       "objectId": str(uuidlib.uuid4()), "name": "x"}},
+           {"object": [1, 2]},
+           {"objects": []}]
+    for payload in bad:
+        observer.publish(topic, json.dumps(payload))
+    observer.publish(topic, b"\xff not json")
+    good = str(uuidlib.uuid4())
+    request(observer, (0, 0), good, asker)
+    wait_for(lambda: observer.on("/RSV/%s/%s" % (source.identity_id, good)), what="the good request answered")
+    counters = source.counters()
+    dropped = {k: v for k, v in counters.items() if k.startswith("dropped.")}
+    assert sum(dropped.values()) == 5, dropped
+    assert dropped.get("dropped.wrong_type") == 3 and dropped.get("dropped.missing_field") == 1, dropped
+    assert counters["catchups_answered"] == 1
+
+
+class _FakeMqtt:
+    def __init__(self):
+        self.subscribed = []
+
+    def socket(self):
+        return None
+
+    def subscribe(self, topics, qos=0):
+        self.subscribed += [t for t, _ in topics] if isinstance(topics, list) else [topics]
+        return 0, 1
+
+    def unsubscribe(self, topics):
+        return 0, 2
+
+    def publish(self, topic, payload, qos=0):
+        class Info:
+            rc = 0
+        return Info()
+
+
+def test_the_areas_a_robot_observes_are_subscribed_again_on_every_connect(make_update):
+    client = CoatyBridgeClient(BridgeConfig("robot_0"), lambda u, t: None)   # never started
+    client.note_own_position((5.0, 5.0))
+    client.publish_obstacle(make_update(version=1))                                   # queued offline
+    client.publish_obstacle(make_update(version=1, rectangle=OTHER_AREA_RECT, marked=(OTHER_AREA_CELL,), cleared=()))
+    expected = ["coaty/+/fleet/CHN:%s/+" % catchup.channel(a) for a in ((0, 0), (2, 0))]
+    assert client._catchup_topics() == expected
+    fake = client._mqtt = _FakeMqtt()
+    client._on_connect(fake, None, {}, 0)
+    assert set(expected) <= set(fake.subscribed), fake.subscribed
+
+
+def test_without_obstacle_areas_nothing_is_observed(make_update):
+    client = CoatyBridgeClient(BridgeConfig("robot_0", obstacle_area_size=0), lambda u, t: None)
+    client.publish_obstacle(make_update(version=1))
+    assert client._catchup_topics() == []
