@@ -62,10 +62,11 @@ def make_client(broker):
     from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
     clients = []
 
-    def make(robot_name, received=None, start=True, **config):
+    def make(robot_name, received=None, start=True, clock=None, **config):
         config.setdefault("broker_url", broker.url)
         sink = received if received is not None else []
-        client = CoatyBridgeClient(BridgeConfig(robot_name, **config), lambda u, t: sink.append(u))
+        extra = {} if clock is None else {"clock": clock}   # an injected clock: now[0] of the test's own list
+        client = CoatyBridgeClient(BridgeConfig(robot_name, **config), lambda u, t: sink.append(u), **extra)
         client.received_updates = sink
         clients.append(client)
         if start:

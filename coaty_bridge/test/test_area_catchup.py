@@ -70,39 +70,32 @@ def test_a_robot_entering_an_area_catches_up_from_the_robots_holding_updates_the
 
 
 @pytest.mark.broker
-def test_a_robot_stops_observing_an_area_once_its_updates_there_have_expired(broker, make_update, observer,
+def test_a_robot_stops_observing_an_area_once_its_updates_there_have_expired(make_client, make_update, observer,
                                                                              wait_for):
     now = [1000.0]
-    source = CoatyBridgeClient(BridgeConfig("robot_0", broker_url=broker.url), lambda u, t: None,
-                               clock=lambda: now[0])
-    source.start()
-    try:
-        wait_for(lambda: source.subscribed, what="subscribed")
-        source.note_own_position((5.0, 5.0))
-        assert source.publish_obstacle(make_update(version=1, deadline=20))                    # area (0, 0)
-        lasting = make_update(version=1, deadline=600, rectangle=OTHER_AREA_RECT,
-                                  marked=(OTHER_AREA_CELL,), cleared=())              # area (2, 0)
-        assert source.publish_obstacle(lasting)
-        now[0] = 1030.0                                                # the first one has expired everywhere
-        asker = str(uuidlib.uuid4())
-        c1, c2, c3 = (str(uuidlib.uuid4()) for _ in range(3))
-        wait_for(lambda: len(observer.on("CHN:" + catchup.channel((2, 0)))) == 0 and source.subscribed,
-                 what="nothing asked yet")
-        request(observer, (0, 0), c1, asker)
-        wait_for(lambda: source.counters().get("catchup_areas_left") == 1, what="area (0, 0) left")
-        # after it: a request for (0, 0) that must not reach it, then one for (2, 0) that must (in order)
-        request(observer, (0, 0), c2, asker)
-        request(observer, (2, 0), c3, asker)
-        wait_for(lambda: answered(observer, source, c3), what="the answer to c3")
-        assert answered(observer, source, c3) == [(lasting.uuid, 1)]
-        assert source.counters().get("catchup_areas_left") == 1, "still observing area (0, 0) after leaving it"
-        assert not observer.on("/RSV/%s/%s" % (source.identity_id, c1))
-        # the same request again: each area of one request is answered once
-        request(observer, (2, 0), c3, asker)
-        wait_for(lambda: source.counters().get("dropped.discover_rate_limited") == 1, what="the repeat dropped")
-        assert len(observer.on("/RSV/%s/%s" % (source.identity_id, c3))) == 1
-    finally:
-        source.stop(timeout=0.5)
+    source = make_client("robot_0", clock=lambda: now[0])
+    wait_for(lambda: source.subscribed, what="subscribed")
+    source.note_own_position((5.0, 5.0))
+    assert source.publish_obstacle(make_update(version=1, deadline=20))                    # area (0, 0)
+    lasting = make_update(version=1, deadline=600, rectangle=OTHER_AREA_RECT, marked=(OTHER_AREA_CELL,),
+                          cleared=())                                                           # area (2, 0)
+    assert source.publish_obstacle(lasting)
+    now[0] = 1030.0                                                # the first one has expired everywhere
+    asker = str(uuidlib.uuid4())
+    c1, c2, c3 = (str(uuidlib.uuid4()) for _ in range(3))
+    request(observer, (0, 0), c1, asker)
+    wait_for(lambda: source.counters().get("catchup_areas_left") == 1, what="area (0, 0) left")
+    # after it: a request for (0, 0) that must not reach it, then one for (2, 0) that must (in order)
+    request(observer, (0, 0), c2, asker)
+    request(observer, (2, 0), c3, asker)
+    wait_for(lambda: answered(observer, source, c3), what="the answer to c3")
+    assert answered(observer, source, c3) == [(lasting.uuid, 1)]
+    assert source.counters().get("catchup_areas_left") == 1, "still observing area (0, 0) after leaving it"
+    assert not observer.on("/RSV/%s/%s" % (source.identity_id, c1))
+    # the same request again: each area of one request is answered once
+    request(observer, (2, 0), c3, asker)
+    wait_for(lambda: source.counters().get("dropped.discover_rate_limited") == 1, what="the repeat dropped")
+    assert len(observer.on("/RSV/%s/%s" % (source.identity_id, c3))) == 1
 
 
 @pytest.mark.broker

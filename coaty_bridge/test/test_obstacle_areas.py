@@ -76,56 +76,46 @@ def test_without_obstacle_areas_every_update_goes_to_every_robot(make_client, ma
 
 
 @pytest.mark.broker
-def test_far_copies_are_renewed_before_their_lease_runs_out(broker, make_client, make_update, wait_for):
+def test_far_copies_are_renewed_before_their_lease_runs_out(make_client, make_update, wait_for):
     """The robots near the obstacle hold it until its last update's deadline; the far ones until the
     last fleet-wide one's. The robot that made the last update sends it fleet-wide (aged) shortly
     before the far copies would expire, once."""
     now = [1000.0]
-    source = CoatyBridgeClient(BridgeConfig("robot_0", broker_url=broker.url), lambda u, t: None,
-                               clock=lambda: now[0])
-    source.start()
+    source = make_client("robot_0", clock=lambda: now[0])
     far = make_client("robot_2")
-    try:
-        wait_for(lambda: source.subscribed and far.subscribed, what="subscribed")
-        source.note_own_position((5.0, 5.0))
-        far.note_own_position(FAR)
-        first = make_update(version=1, deadline=20)        # far copies: until 1020
-        wait_for(lambda: source.publish_obstacle(first) and versions(far, first.uuid) == [1], what="v1")
-        now[0] = 1005.0
-        assert source.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=20))  # near: 1025
-        assert source.counters()["published_to_area"] == 1
-        now[0] = 1010.0
-        assert source.renew_due() == 0, "renewed long before the far copies expire"
-        now[0] = 1018.0                                     # 2 s (the least margin) before 1020
-        assert source.renew_due() == 1
-        wait_for(lambda: 2 in versions(far, first.uuid), what="the renewal at the far robot")
-        renewal = [u for u in far.received_updates if u.uuid == first.uuid and u.version == 2][0]
-        assert renewal.deadline == 7, "aged by the 13 s since it was made: the far copy ends with the near ones"
-        now[0] = 1019.0
-        assert source.renew_due() == 0, "renewed twice"
-    finally:
-        source.stop(timeout=0.5)
+    wait_for(lambda: source.subscribed and far.subscribed, what="subscribed")
+    source.note_own_position((5.0, 5.0))
+    far.note_own_position(FAR)
+    first = make_update(version=1, deadline=20)        # far copies: until 1020
+    wait_for(lambda: source.publish_obstacle(first) and versions(far, first.uuid) == [1], what="v1")
+    now[0] = 1005.0
+    assert source.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=20))  # near: 1025
+    assert source.counters()["published_to_area"] == 1
+    now[0] = 1010.0
+    assert source.renew_due() == 0, "renewed long before the far copies expire"
+    now[0] = 1018.0                                     # 2 s (the least margin) before 1020
+    assert source.renew_due() == 1
+    wait_for(lambda: 2 in versions(far, first.uuid), what="the renewal at the far robot")
+    renewal = [u for u in far.received_updates if u.uuid == first.uuid and u.version == 2][0]
+    assert renewal.deadline == 7, "aged by the 13 s since it was made: the far copy ends with the near ones"
+    now[0] = 1019.0
+    assert source.renew_due() == 0, "renewed twice"
 
 
 @pytest.mark.broker
-def test_a_renewal_covered_by_a_fleet_wide_update_is_not_sent(broker, make_update, wait_for):
+def test_a_renewal_covered_by_a_fleet_wide_update_is_not_sent(make_client, make_update, wait_for):
     now = [1000.0]
-    source = CoatyBridgeClient(BridgeConfig("robot_0", broker_url=broker.url), lambda u, t: None,
-                               clock=lambda: now[0])
-    source.start()
-    try:
-        wait_for(lambda: source.subscribed, what="subscribed")
-        source.note_own_position((5.0, 5.0))
-        first = make_update(version=1, deadline=20)
-        source.publish_obstacle(first)
-        now[0] = 1005.0
-        source.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=20))
-        # a later update the whole fleet heard, lasting as long: nothing to renew
-        source.publish_obstacle(make_update(uuid=first.uuid, version=3, marked=(), cleared=(880221,), deadline=20))
-        now[0] = 1030.0
-        assert source.renew_due() == 0
-    finally:
-        source.stop(timeout=0.5)
+    source = make_client("robot_0", clock=lambda: now[0])
+    wait_for(lambda: source.subscribed, what="subscribed")
+    source.note_own_position((5.0, 5.0))
+    first = make_update(version=1, deadline=20)
+    source.publish_obstacle(first)
+    now[0] = 1005.0
+    source.publish_obstacle(marking(make_update, first, 2, (880250,), deadline=20))
+    # a later update the whole fleet heard, lasting as long: nothing to renew
+    source.publish_obstacle(make_update(uuid=first.uuid, version=3, marked=(), cleared=(880221,), deadline=20))
+    now[0] = 1030.0
+    assert source.renew_due() == 0
 
 
 @pytest.mark.broker
