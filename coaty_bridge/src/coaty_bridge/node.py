@@ -229,12 +229,13 @@ class BridgeNode:
         self.from_fleet = SafePublisher(
             lambda: rospy.Publisher("from_fleet", SharedObstacle, queue_size=100),
             topic="%s/from_fleet" % config.robot_name, shutting_down=node_shutting_down)
+        # set before the publisher whose listener reads it: a subscriber may connect while a publisher registers
+        self._started = False
         # Resolves answering our Discover restore state: the handler never takes them as a renewal (issue 43)
         self.fleet_state = SafePublisher(
             lambda: rospy.Publisher("fleet_state", SharedObstacle, queue_size=1000,
                                     subscriber_listener=_OnNewSubscriber(self._on_restarted_handler)),
             topic="%s/fleet_state" % config.robot_name, shutting_down=node_shutting_down)
-        self._started = False
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.client = CoatyBridgeClient(config, self._on_fleet_obstacle, on_footprint=self._on_fleet_footprint,
                                         on_footprint_withdrawn=self._on_fleet_footprint_withdrawn)

@@ -146,6 +146,29 @@ class HandlerNode:
         self._dropped_reported = 0
         self._map_frame = ""
         self._list_cache = {}       # uuid -> (cells, metadata, SharedObstacle) of the last list
+        # Fleet messages wait in a queue per source, served round-robin by one worker (issue 43, item 5): a
+        # login flooding valid obstacles fills only its own queue, and another robot's message waits for at
+        # most one of its messages, not for the flood (rospy's own queue drops the oldest, whoever sent it).
+        self._fleet_inbox = FairQueue(params.source_queue_size)
+        # Built before any publisher: a subscriber may connect while a publisher registers (the layer of a move_base
+        # started first, a bench's probe), and its listener hands it what the handler holds. Built after them, that
+        # subscriber's connection failed ("no attribute 'handler'") and it never got an obstacle.
+        self.handler = SharingHandler(
+            params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
+            on_to_layer=lambda o: self._deliver(self._pub_layer, o),
+            on_to_fleet=self._to_fleet,
+            on_expired=lambda u: self._pub_expired.publish(String(data=u)),
+            on_change=self._list_changed,
+            max_cells_per_message=params.max_cells_per_message,
+            max_obstacle_extent=params.max_obstacle_extent,
+            merge_distance=params.merge_distance,
+            max_obstacle_cells=params.max_obstacle_cells,
+            max_version_step=params.max_version_step,
+            max_clock_skew=params.clock_skew,
+            max_obstacles_per_source=params.max_obstacles_per_source,
+            source_update_rate=params.source_update_rate,
+            source_update_burst=params.source_update_burst,
+            max_sensor_reach=params.max_sensor_reach)
         # One message that cannot be serialised is dropped there; the publisher stays usable.
         self._pub_layer = SafePublisher(
             lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100,
@@ -171,26 +194,6 @@ class HandlerNode:
         # time, which a flooding login's obstacles made other robots' messages wait for).
         self._pub_markers = rospy.Publisher("fleet_obstacle_markers", MarkerArray, queue_size=1,
                                             subscriber_listener=_OnNewSubscriber(self._on_new_markers_subscriber))
-        # Fleet messages wait in a queue per source, served round-robin by one worker (issue 43, item 5): a
-        # login flooding valid obstacles fills only its own queue, and another robot's message waits for at
-        # most one of its messages, not for the flood (rospy's own queue drops the oldest, whoever sent it).
-        self._fleet_inbox = FairQueue(params.source_queue_size)
-        self.handler = SharingHandler(
-            params.robot_name, lambda: rospy.get_time(), params.obstacle_duration,
-            on_to_layer=lambda o: self._deliver(self._pub_layer, o),
-            on_to_fleet=self._to_fleet,
-            on_expired=lambda u: self._pub_expired.publish(String(data=u)),
-            on_change=self._list_changed,
-            max_cells_per_message=params.max_cells_per_message,
-            max_obstacle_extent=params.max_obstacle_extent,
-            merge_distance=params.merge_distance,
-            max_obstacle_cells=params.max_obstacle_cells,
-            max_version_step=params.max_version_step,
-            max_clock_skew=params.clock_skew,
-            max_obstacles_per_source=params.max_obstacles_per_source,
-            source_update_rate=params.source_update_rate,
-            source_update_burst=params.source_update_burst,
-            max_sensor_reach=params.max_sensor_reach)
         self._publish_list()  # an empty latched list, so late joiners see "nothing" not silence
         rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
         rospy.Subscriber("obstacle_proposals", SharedObstacle, self._on_proposal, queue_size=100)
