@@ -144,6 +144,10 @@ def secure_vda(tmp_path):
         procs.append(proc)
         return proc
     try:
+        # the master first: a node whose first parameter read finds no master dies of ConnectionRefusedError
+        # (run_broker did under CI's load, and the test then waited for secrets nobody would write)
+        wait_until(lambda: subprocess.run(["rosparam", "list"], env=env, capture_output=True).returncode == 0,
+                   "the rosmaster")
         node([RUN_BROKER, "__name:=fleet_broker", "_port:=0", "_url_param:=/fleet/broker_url", "_robots:=2",
               "_credentials_dir:=" + folder])
         node([HANDLER, "__ns:=robot_0", "__name:=sharing_handler"])
@@ -151,8 +155,6 @@ def secure_vda(tmp_path):
               "_broker_url_param:=/fleet/broker_url", "_manufacturer:=fleet", "_serial_number:=robot_0",
               "_protocol_version:=" + VERSION, "_username:=robot_0",
               "_password_file:=%s/robots/robot_0.password" % folder, "_state_interval:=1.0"])
-        wait_until(lambda: subprocess.run(["rosparam", "list"], env=env, capture_output=True).returncode == 0,
-                   "the rosmaster")
         probe = Probe(env)
         procs.append(probe.proc)
         try:
