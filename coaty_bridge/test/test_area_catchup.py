@@ -94,11 +94,17 @@ def test_a_robot_stops_observing_an_area_once_its_updates_there_have_expired(mak
     c1, c2, c3 = (str(uuidlib.uuid4()) for _ in range(3))
     request(observer, (0, 0), c1, asker)
     wait_for(lambda: source.counters().get("catchup_areas_left") == 1, what="area (0, 0) left")
-    # after it: a request for (0, 0) that must not reach it, then one for (2, 0) that must (in order)
+    # its UNSUBSCRIBE and the observer's next requests travel on two connections: only once something the robot
+    # sent after the UNSUBSCRIBE is back has the broker dropped the subscription (an ordered event, not a sleep)
+    after = make_update(uuid=lasting.uuid, version=2, deadline=600, rectangle=OTHER_AREA_RECT,
+                        marked=(OTHER_AREA_CELL,), cleared=())
+    assert source.publish_obstacle(after)
+    wait_for(lambda: seen_published(observer, after), what="the robot's next update back from the broker")
+    # then a request for (0, 0) that must not reach it, and one for (2, 0) that must (in order)
     request(observer, (0, 0), c2, asker)
     request(observer, (2, 0), c3, asker)
     wait_for(lambda: answered(observer, source, c3), what="the answer to c3")
-    assert answered(observer, source, c3) == [(lasting.uuid, 1)]
+    assert answered(observer, source, c3) == [(lasting.uuid, 1), (lasting.uuid, 2)]
     assert source.counters().get("catchup_areas_left") == 1, "still observing area (0, 0) after leaving it"
     assert not observer.on("/RSV/%s/%s" % (source.identity_id, c1))
     # the same request again: each area of one request is answered once
