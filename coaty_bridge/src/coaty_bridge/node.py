@@ -20,7 +20,7 @@ from geometry_msgs.msg import Point32, PolygonStamped
 from sharing_msgs.msg import RobotFootprint, RobotFootprintArray, SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.authority import MASTER_CONTROL
-from sharing_msgs.safe_publisher import SafePublisher
+from sharing_msgs.safe_publisher import SafePublisher, node_shutting_down
 
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient, choose_broker_url
 from coaty_bridge.connection import masked_client_id
@@ -133,11 +133,6 @@ def fleet_robots_message(heard, now, timeout):
 
 #: Hz fleet_robots is published at while a known robot drives on a dead-reckoned advert (ROS only, not the wire)
 MOVING_PEERS_RATE = 10.0
-
-
-def node_shutting_down():
-    """Whether this node is closing: rospy closes its topics before is_shutdown() turns true."""
-    return rospy.is_shutdown() or rospy.core.is_shutdown_requested()
 
 
 def default_robot_name():

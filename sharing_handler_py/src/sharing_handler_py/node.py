@@ -15,7 +15,7 @@ from nav_msgs.msg import OccupancyGrid
 from sharing_msgs.msg import SharedObstacle, SharedObstacleArray
 from sharing_msgs import publisher_links, safe_publisher
 from sharing_msgs.authority import FairQueue
-from sharing_msgs.safe_publisher import SafePublisher
+from sharing_msgs.safe_publisher import SafePublisher, node_shutting_down
 from sharing_msgs.srv import (AddObstacle, AddObstacleResponse, ListObstacles, ListObstaclesResponse, RemoveObstacle,
                               RemoveObstacleResponse)
 from std_msgs.msg import String
@@ -30,12 +30,6 @@ from sharing_handler_py.validation import Geometry, HandlerParams, Obstacle, Rec
 
 #: updates to the fleet kept while no bridge listens (the oldest go first beyond)
 UNSENT_KEPT = 1000
-
-
-
-def _shutting_down():
-    """Whether this node is closing: rospy closes its topics before is_shutdown() turns true."""
-    return rospy.is_shutdown() or rospy.core.is_shutdown_requested()
 
 
 class _OnNewSubscriber(rospy.SubscribeListener):
@@ -174,7 +168,7 @@ class HandlerNode:
             lambda: rospy.Publisher("shared_obstacles", SharedObstacle, queue_size=100,
                                     subscriber_listener=_OnNewSubscriber(self._on_new_layer)),
             topic="%s/shared_obstacles" % params.robot_name,
-            shutting_down=_shutting_down)
+            shutting_down=node_shutting_down)
         self._pub_expired = rospy.Publisher("expired_obstacles", String, queue_size=100)
         # What goes to the fleet while no bridge listens (it crashed and is starting again: issue 43, item 8) is kept,
         # and handed to the bridge when it subscribes, deadlines aged: nothing this robot shares is lost that way.
@@ -183,7 +177,7 @@ class HandlerNode:
             lambda: rospy.Publisher("to_fleet", SharedObstacle, queue_size=1000,
                                     subscriber_listener=_OnNewSubscriber(self._on_new_bridge)),
             topic="%s/to_fleet" % params.robot_name,
-            shutting_down=_shutting_down)
+            shutting_down=node_shutting_down)
         self._pub_list = rospy.Publisher("shared_obstacle_list", SharedObstacleArray, queue_size=1,
                                          latch=True)
         self._pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)

@@ -50,6 +50,12 @@ def _discard_partial_bytes(publisher):
     return True
 
 
+def node_shutting_down():
+    """``shutting_down`` for a rospy node: rospy closes its topics before is_shutdown() turns true."""
+    import rospy   # here only: the rest of this module runs without ROS
+    return rospy.is_shutdown() or rospy.core.is_shutdown_requested()
+
+
 class SafePublisher:
     """``publish(msg, what)`` returns True when the message was handed to ROS, False when it
     was dropped. ``what`` names the message in the log line (robot, obstacle, version).
