@@ -57,10 +57,12 @@ def decode_request(data):
 class CatchUpMixin:
     """Area catch-up of CoatyBridgeClient: asking (on entering areas) and answering (for own updates)."""
 
+    def _catchup_subscription(self, area):
+        return subscription(self.config.namespace, "CHN:" + channel(area))
+
     def _catchup_topics(self):
         """The catch-up channels this robot observes now (subscribed again on every connect)."""
-        ns = self.config.namespace
-        return [subscription(ns, "CHN:" + channel(a)) for a in sorted(self._catchup_areas)]
+        return [self._catchup_subscription(a) for a in sorted(self._catchup_areas)]
 
     def _observe_catchup_area(self, update):
         """An own update was published: observe its area's catch-up channel, if not yet."""
@@ -72,7 +74,7 @@ class CatchUpMixin:
                 return
             self._catchup_areas.add(area)
             if self._connected:
-                self._mqtt.subscribe(subscription(self.config.namespace, "CHN:" + channel(area)), self._qos)
+                self._mqtt.subscribe(self._catchup_subscription(area), self._qos)
 
     def _ask_areas(self, new_areas):
         """Asks each of ``new_areas`` for the updates made there (one Channel event each, one correlation id)."""
@@ -113,7 +115,7 @@ class CatchUpMixin:
             with self._lock:
                 self._catchup_areas.discard(area)
                 if self._connected:
-                    self._mqtt.unsubscribe(subscription(self.config.namespace, "CHN:" + topic.filter))
+                    self._mqtt.unsubscribe(self._catchup_subscription(area))
             self._count("catchup_areas_left")
             return
         self._count("catchups_answered")
