@@ -179,3 +179,30 @@ def test_without_obstacle_areas_nothing_is_observed(make_update):
     client = CoatyBridgeClient(BridgeConfig("robot_0", obstacle_area_size=0), lambda u, t: None)
     client.publish_obstacle(make_update(version=1))
     assert client._catchup_topics() == []
+
+
+def _catchup_memory_after(requesters):
+    """A client (burst 1, no refill) that has answered a first request for area (0, 0) and then ``requesters`` - 1
+    other requesters; returns it and the first request (requester, correlation id)."""
+    client = CoatyBridgeClient(BridgeConfig("robot_0", discover_answer_burst=1), lambda u, t: None,
+                               clock=lambda: 1000.0)   # never started
+    first = (str(uuidlib.uuid4()), str(uuidlib.uuid4()))
+    assert client._catchup_allowed(first[0], first[1], (0, 0))
+    for _ in range(requesters - 1):
+        assert client._catchup_allowed(str(uuidlib.uuid4()), str(uuidlib.uuid4()), (0, 0))
+    return client, first
+
+
+def test_max_requesters_requests_are_remembered():
+    """Each requester's last request is remembered for MAX_REQUESTERS requesters: another area of it is answered
+    without a token (the first requester has none left), the same area not again."""
+    client, (requester, correlation_id) = _catchup_memory_after(catchup.MAX_REQUESTERS)
+    assert client._catchup_allowed(requester, correlation_id, (1, 0))
+    assert not client._catchup_allowed(requester, correlation_id, (0, 0))
+
+
+def test_one_more_requester_and_the_memory_starts_again():
+    """Beyond MAX_REQUESTERS the memory is cleared: a repeat then costs a token (here a fresh bucket, as the Discover
+    buckets forget the oldest requester beyond the same number) and is answered."""
+    client, (requester, correlation_id) = _catchup_memory_after(catchup.MAX_REQUESTERS + 1)
+    assert client._catchup_allowed(requester, correlation_id, (0, 0))
