@@ -1,14 +1,17 @@
 """Where bench_fleet_scale's robots stand, drive and see obstacles (no ROS, no MQTT).
 
 The robots stand in rows of ROBOTS_PER_ROW, 2.4 m apart, rows ROW_SPACING m apart (the map grows with the fleet);
-a driving robot goes back and forth along the aisle 15 m past its row. A standing robot's obstacles lie around it,
-within its sensor reach (obstacle_rectangle), as the evidence rule requires of what a robot shares.
+a driving robot goes back and forth along its aisle, AISLE_OFFSET m past its row unless told otherwise. A standing
+robot's obstacles lie around it, within its sensor reach (obstacle_rectangle), as the evidence rule requires of what a
+robot shares.
 """
 import math
 
 from sharing_handler_py.validation import Geometry, Rectangle
 
 ROBOTS_PER_ROW, ROW_SPACING = 40, 30.0
+#: m from a row to its drivers' aisle by default: halfway to the next row, the farthest from every obstacle
+AISLE_OFFSET = ROW_SPACING / 2
 
 
 def position(index):
@@ -23,6 +26,15 @@ OBSTACLE_SIZE = 0.5
 OBSTACLE_COLUMNS = (-0.85, 0.35)
 OBSTACLE_ROWS = (0.6, -1.1, 1.7, -2.2, 2.8)
 MAX_OBSTACLES_PER_ROBOT = len(OBSTACLE_COLUMNS) * len(OBSTACLE_ROWS)
+#: half the width of the tutorials' footprint (footprint_points), m
+ROBOT_HALF_WIDTH = 0.325
+
+
+def aisle_offset_range():
+    """(lowest, highest) m past its row an aisle may lie: a driver's footprint clears the obstacles of its own row
+    (up to max(OBSTACLE_ROWS) + OBSTACLE_SIZE above it) and of the next row (down to min(OBSTACLE_ROWS) below it)."""
+    return (max(OBSTACLE_ROWS) + OBSTACLE_SIZE + ROBOT_HALF_WIDTH,
+            ROW_SPACING + min(OBSTACLE_ROWS) - ROBOT_HALF_WIDTH)
 
 
 def obstacle_rectangle(index, k):

@@ -11,10 +11,21 @@ from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.topics import Topic
 
 OT = codec.DEFAULT_OBJECT_TYPE
+#: m, the obstacle squares the positions below are laid out for (the default is smaller; the rules are the same)
+AREA_M = 10.0
 # make_update's rectangle (1, 2)-(3.5, 4) and cell 880221: obstacle area (0, 0) at 10 m. Others (grid origin
 # (-10, -20), 0.05 m, 2000 cells a row), each with a cell inside: area (2, 0), area (4, 4)
 OTHER_AREA_RECT, OTHER_AREA_CELL = (25.0, 2.0, 26.0, 3.0), 445 * 2000 + 705
 FAR_AREA_RECT, FAR_AREA_CELL = (44.0, 44.0, 45.0, 45.0), 1285 * 2000 + 1085
+
+
+@pytest.fixture
+def make_client(make_client):
+    """The conftest's make_client with this file's AREA_M obstacle squares, unless a test says otherwise."""
+    def make(robot_name, **config):
+        config.setdefault("obstacle_area_size", AREA_M)
+        return make_client(robot_name, **config)
+    return make
 
 
 def versions(client, uuid):
@@ -164,7 +175,7 @@ class _FakeMqtt:
 
 
 def test_the_areas_a_robot_observes_are_subscribed_again_on_every_connect(make_update):
-    client = CoatyBridgeClient(BridgeConfig("robot_0"), lambda u, t: None)   # never started
+    client = CoatyBridgeClient(BridgeConfig("robot_0", obstacle_area_size=AREA_M), lambda u, t: None)   # never started
     client.note_own_position((5.0, 5.0))
     client.publish_obstacle(make_update(version=1))                                   # queued offline
     client.publish_obstacle(make_update(version=1, rectangle=OTHER_AREA_RECT, marked=(OTHER_AREA_CELL,), cleared=()))

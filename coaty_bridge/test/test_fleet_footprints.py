@@ -313,8 +313,8 @@ def test_a_robot_hears_the_areas_around_it_and_follows_its_own_moves(make_fleet_
     """Adverts go out per 10 m area; each bridge hears the 3 x 3 areas around its own robot, so a
     robot 25 m away is not heard until one of the two comes near; plain-objectType adverts (a peer
     without areas) are heard anywhere."""
-    listener = make_fleet_client("robot_0")
-    near, far = make_fleet_client("robot_1"), make_fleet_client("robot_2")
+    listener = make_fleet_client("robot_0", footprint_area_size=10.0)   # the positions below are for 10 m areas
+    near, far = make_fleet_client("robot_1", footprint_area_size=10.0), make_fleet_client("robot_2", footprint_area_size=10.0)
     wait_for(lambda: listener.subscribed and near.subscribed and far.subscribed and len(observer.on("/DSC/")) == 3,
              what="all subscribed")
     listener.note_own_position((5.0, 5.0))            # area (0, 0): hears x, y in [-10, 20)
@@ -378,10 +378,51 @@ def test_an_area_change_while_offline_is_subscribed_on_connect(broker, observer,
     try:
         wait_for(lambda: listener.subscribed and observer.on("/DSC/"), what="robot_0 subscribed")
         sender = str(uuidlib.uuid4())
-        topic = str(Topic("fleet", "ADV", sender, object_type=OT + ".area_11_0"))
+        # the square east of robot_0's, at the default footprint_area_size
+        size = BridgeConfig("robot_0").footprint_area_size
+        ix, iy = areas.area_of((105.0, 5.0), size)
+        east = areas.area_object_type(OT, (ix + 1, iy))
+        cx, cy = (ix + 1.5) * size, (iy + 0.5) * size
+        topic = str(Topic("fleet", "ADV", sender, object_type=east))
         wait_for(lambda: observer.publish(topic, fp.footprint_payload(
-            make(robot="robot_5", points=((112.0, 1.0), (112.5, 1.0), (112.5, 1.5))), str(uuidlib.uuid4()),
-            OT + ".area_11_0")) or got,
-            what="robot_0 hears area (11, 0)")
+            make(robot="robot_5", points=((cx, cy), (cx + 0.5, cy), (cx + 0.5, cy + 0.5))), str(uuidlib.uuid4()),
+            east)) or got,
+            what="robot_0 hears the square east of its own, %s" % east)
     finally:
         listener.stop(timeout=0.5)
+
+
+@pytest.mark.parametrize("x, inside", [(9.991, True), (9.989, False), (14.999, True), (15.009, True), (15.011, False)])
+def test_a_point_lies_in_a_square_give_or_take_a_centimetre(x, inside):
+    # square (2, 0) at 5 m spans x 10..15; the rounding of the wire (millimetres) stays within 0.01 m of it
+    assert areas.lies_in((x, 2.0), (2, 0), 5.0) is inside
+
+
+@pytest.mark.broker
+def test_a_peer_advertising_at_another_area_size_is_named_once_and_still_heard(make_fleet_client, observer, wait_for,
+                                                                                caplog):
+    """A bridge with the old 10 m squares puts a robot at (12.2, 3.2) under area_1_0; at 5 m that point is in square
+    (2, 0). Robots of the two sizes miss each other's adverts, so the one that notices says what to set."""
+    listener = make_fleet_client("robot_0", footprint_area_size=5.0)
+    wait_for(lambda: listener.subscribed, what="robot_0 subscribed")
+    listener.note_own_position((7.0, 2.0))     # hears the 5 m squares (0..2, -1..1)
+    points = ((12.0, 3.0), (12.5, 3.0), (12.5, 3.5), (12.0, 3.5))
+    sender = str(uuidlib.uuid4())
+
+    def advertise(area, robot):
+        object_type = areas.area_object_type(OT, area)
+        observer.publish(str(Topic("fleet", "ADV", sender, object_type=object_type)),
+                         fp.footprint_payload(make(robot=robot, points=points), str(uuidlib.uuid4()), object_type))
+
+    caplog.set_level("WARNING", logger="coaty_bridge.client")
+    wait_for(lambda: advertise((2, 0), "robot_5") or any(f.robot == "robot_5" for f, _ in listener.footprints),
+             what="robot_5's advert in the right square")
+    assert listener.counters().get("footprint_area_mismatches", 0) == 0
+    for _ in range(2):
+        advertise((1, 0), "robot_7")
+    wait_for(lambda: sum(f.robot == "robot_7" for f, _ in listener.footprints) == 2,
+             what="robot_7's two adverts, still taken")
+    assert listener.counters()["footprint_area_mismatches"] == 2
+    warnings = [r.getMessage() for r in caplog.records if "another area size" in r.getMessage()]
+    assert len(warnings) == 1, warnings
+    assert "'robot_7'" in warnings[0] and "(2, 0)" in warnings[0] and "footprint_area_size 5 m" in warnings[0]

@@ -13,8 +13,19 @@ from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
 from coaty_bridge.topics import Topic
 
 OT = codec.DEFAULT_OBJECT_TYPE
+#: m, the obstacle squares the positions below are laid out for (the default is smaller; the rules are the same)
+AREA_M = 10.0
 # make_update's rectangle (1, 2)-(3.5, 4): centre (2.25, 3), obstacle area (0, 0) at 10 m
 NEAR, FAR = (12.0, 5.0), (45.0, 5.0)
+
+
+@pytest.fixture
+def make_client(make_client):
+    """The conftest's make_client with this file's AREA_M obstacle squares, unless a test says otherwise."""
+    def make(robot_name, **config):
+        config.setdefault("obstacle_area_size", AREA_M)
+        return make_client(robot_name, **config)
+    return make
 
 
 def versions(client, uuid):

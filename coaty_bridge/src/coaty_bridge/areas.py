@@ -50,3 +50,11 @@ def is_scoped_object_type(candidate, object_type):
 def rectangle_centre(rectangle):
     """Centre (x, y) of [min_x, min_y, max_x, max_y]: where an obstacle is, for its area."""
     return ((rectangle[0] + rectangle[2]) / 2.0, (rectangle[1] + rectangle[3]) / 2.0)
+
+
+def lies_in(point, area, area_size, tolerance=0.01):
+    """Whether ``point`` lies in square ``area`` of side ``area_size``, give or take ``tolerance`` m (a sender's
+    coordinates are rounded to millimetres on the wire, so a centroid on an edge may fall either side)."""
+    ix, iy = area
+    return (ix * area_size - tolerance <= point[0] < (ix + 1) * area_size + tolerance
+            and iy * area_size - tolerance <= point[1] < (iy + 1) * area_size + tolerance)

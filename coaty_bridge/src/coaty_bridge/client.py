@@ -61,6 +61,7 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         self._poses = PoseHistory(config.evidence_rule)
         self._own_footprints = collections.deque(maxlen=OWN_FOOTPRINTS_KEPT)
         self._evidence_warned = None
+        self._area_mismatch_warned = set()   # robots warned about advertising at another footprint_area_size
         # obstacle messages kept back until this robot's first footprint (evidence.py); only for a robot that
         # advertises its footprint (the node says so: expect_footprints)
         self._awaiting_evidence = []

@@ -107,13 +107,16 @@ class BridgeConfig:
     # then cross the network in clear text); false refuses it at start-up (issue 27, item 9)
     insecure: bool = False
     # metres; fleet-wide. Adverts go out per square of the map and each bridge hears the 3 x 3
-    # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet.
-    footprint_area_size: float = 10.0
+    # squares around its robot (see footprint.py); 0 = one advert channel for the whole fleet. 5 m: a robot
+    # hears every robot within 5 m, beyond what costmap_2d marks (obstacle_range 2.5 m) plus a robot's size and
+    # a far advert's 1 m of drift; 10 m squares (the default before) made each robot hear 4 x the area for nothing.
+    footprint_area_size: float = 5.0
     # metres; fleet-wide. An obstacle's monitoring updates (not its first share, not an update that only
     # clears) go out under the square of its rectangle's centre, and each bridge hears the 3 x 3 squares
     # around its robot; far robots get the first share, every clearing update and a renewal before their
-    # copy's lease runs out (issue 29; README "Obstacle areas"). 0 = every update to every robot.
-    obstacle_area_size: float = 10.0
+    # copy's lease runs out (issue 29; README "Obstacle areas"). 0 = every update to every robot. 5 m, as
+    # footprint_area_size: a robot hears the monitoring updates within 5 m, twice obstacle_range.
+    obstacle_area_size: float = 5.0
     # metres; a footprint advert wider or longer than this is not a robot and is dropped
     max_footprint_extent: float = footprints.DEFAULT_MAX_FOOTPRINT_EXTENT
     # robot names whose footprint adverts are taken; empty = any robot (see README "Fleet robot

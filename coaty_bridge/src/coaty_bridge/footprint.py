@@ -21,7 +21,7 @@ advert every ``footprint_driving_interval`` s instead of one every 0.1 m.
 Receivers keep the latest advert per robot and forget a robot not heard for ``robot_timeout``;
 the sharing layers never share cells within a known robot's footprint plus a margin.
 
-Areas (``footprint_area_size`` A > 0, the default 10 m): sent to every peer, adverts grow with
+Areas (``footprint_area_size`` A > 0, the default 5 m): sent to every peer, adverts grow with
 the square of the fleet (100 robots at 2 Hz: 198 adverts per second into each robot), yet a robot
 only needs the robots its own sensors can see. So the map frame is cut into squares of
 A metres, and an advert's objectType names the square holding the footprint's centroid,

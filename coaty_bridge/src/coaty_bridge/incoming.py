@@ -162,6 +162,7 @@ class IncomingMixin:
             elif topic.event == "ADV" and topic.object_type is not None and areas.is_scoped_object_type(
                     topic.object_type, self.config.footprint_object_type):
                 footprint = footprints.decode_footprint_advertise(data, topic.object_type)
+                self._check_footprint_area(footprint, topic)
                 if self._deliver_footprint(footprint, topic):
                     with self._lock:
                         if len(self._footprint_senders) < 4096 or topic.source_id in self._footprint_senders:
@@ -260,6 +261,29 @@ class IncomingMixin:
             self._count("dropped.delivery_error")
             LOG.error("%s: could not deliver obstacle %s v%d from %s: %s: %s", self.config.robot_name,
                       update.uuid, update.version, update.source, type(err).__name__, err)
+
+    def _check_footprint_area(self, footprint, topic):
+        """A peer advertising in a square that does not hold its footprint at our footprint_area_size uses another
+        size: the two robots do not hear each other's adverts (each layer may share the other robot as an
+        obstacle) nor each other's monitoring updates. The advert is still taken; the WARN says what to set."""
+        area = areas.parse_area(topic.object_type, self.config.footprint_object_type)
+        size = self.config.footprint_area_size
+        if area is None or size <= 0:
+            return
+        where = footprints.centroid(footprint.points)
+        if areas.lies_in(where, area, size):
+            return
+        self._count("footprint_area_mismatches")
+        with self._lock:
+            if footprint.robot in self._area_mismatch_warned or len(self._area_mismatch_warned) >= 4096:
+                return
+            self._area_mismatch_warned.add(footprint.robot)
+        LOG.warning("%s: robot %r (sourceId %s) advertises its footprint at (%.2f, %.2f) under square %s, but at our "
+                    "footprint_area_size %g m that point lies in square %s: it uses another area size, and robots "
+                    "with different sizes do not hear each other. Set footprint_area_size and obstacle_area_size "
+                    "the same on every robot of the fleet (the default changed from 10 m to 5 m on 2026-11-29)",
+                    self.config.robot_name, footprint.robot, topic.source_id, where[0], where[1], area, size,
+                    areas.area_of(where, size))
 
     def _deliver_footprint(self, footprint, topic):
         if self.config.authenticate_sources and topic.source_id != identity_for(self.config.namespace,
