@@ -8,7 +8,7 @@ import math
 
 import paho.mqtt.client as mqtt
 
-from coaty_bridge import areas, codec, footprint as footprints, lifetimes, renewals
+from coaty_bridge import areas, codec, footprint as footprints, lifetimes, renewals, replay as replays
 from coaty_bridge.topics import Topic, new_uuid, parse_topic, subscription
 
 LOG = logging.getLogger("coaty_bridge.client")
@@ -222,17 +222,23 @@ class OutgoingMixin:
                 self._counters["own_log_truncated"] += 1
 
     def _replayable_own_updates(self):
-        """This robot's own updates still alive, aged to now; expired ones are forgotten."""
+        """This robot's own updates still alive, aged to now, with what newer ones decided left out (replay.py);
+        expired ones are forgotten."""
         now = self._clock()
         replay = []
+        left_out = 0
         with self._lock:
             for uuid in list(self._own_log):
                 alive = [(u, t) for u, t in self._own_log[uuid] if lifetimes.aged(u, now - t) is not None]
                 if alive:
                     self._own_log[uuid] = alive
-                    replay += [lifetimes.aged(u, now - t) for u, t in alive]
+                    deciding = replays.deciding_updates([lifetimes.aged(u, now - t) for u, t in alive])
+                    left_out += len(alive) - len(deciding)
+                    replay += deciding
                 else:
                     del self._own_log[uuid]
+            if left_out:
+                self._counters["replay_updates_left_out"] += left_out
         return replay
 
     def _obstacle_payload(self, update, object_type=None):
