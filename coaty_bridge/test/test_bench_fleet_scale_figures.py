@@ -54,3 +54,17 @@ def test_a_driving_robot_goes_back_and_forth_along_its_aisle():
     assert bench.aisle_position(1.0, 35.0, 1.0, 188.0) == (1.0, 35.0)
     assert [bench.is_driving(i, 0.5) for i in range(4)] == [False, True, False, True]
     assert not any(bench.is_driving(i, 0.0) for i in range(10)) and all(bench.is_driving(i, 1.0) for i in range(10))
+
+
+def test_the_default_window_holds_one_peer_heartbeat_period_at_100_robots():
+    # a 60 s window after a fleet powered up together held a wave of peer heartbeats or none: 10 to 17 kB per robot
+    # per minute from one run to the next, against ~5 kB on average
+    bench = load()
+    assert bench.heartbeat_period(100) == 297.0
+    assert bench.heartbeat_period(1) == 0.0
+
+
+def test_an_aisle_must_clear_both_rows_obstacles():
+    bench = load()
+    low, high = bench.aisle_offset_range()
+    assert (low, high) == (3.625, 27.475)   # 2.8 + 0.5 + 0.325 above a row; 30 - 2.2 - 0.325 below the next
