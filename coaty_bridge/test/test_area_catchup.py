@@ -8,6 +8,7 @@ import pytest
 
 from coaty_bridge import catchup, codec
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge.errors import CoatyError
 from coaty_bridge.topics import Topic
 
 OT = codec.DEFAULT_OBJECT_TYPE
@@ -89,6 +90,70 @@ def test_a_robot_entering_an_area_catches_up_from_the_robots_holding_updates_the
 
 
 @pytest.mark.broker
+def test_a_robot_coming_back_to_an_area_gets_only_what_was_sent_there_since_it_left(make_client, make_update, observer,
+                                                                                      wait_for):
+    now = [1000.0]
+    source = make_client("robot_0", clock=lambda: now[0])
+    driver = make_client("robot_2", clock=lambda: now[0])
+    newcomer = make_client("robot_3", clock=lambda: now[0])
+    wait_for(lambda: all(c.subscribed for c in (source, driver, newcomer)), what="all connected")
+    source.note_own_position((5.0, 5.0))
+    driver.note_own_position((5.0, 5.0))          # hears area (0, 0)
+    newcomer.note_own_position((45.0, 45.0))
+    first = make_update(version=1, deadline=600)      # all alive throughout
+    assert source.publish_obstacle(first)
+    before = make_update(uuid=first.uuid, version=2, marked=(880250,), cleared=(), deadline=600)
+    assert source.publish_obstacle(before)        # area (0, 0): the driver hears it
+    wait_for(lambda: 2 in versions(driver, first.uuid), what="v2 at the driver")
+    now[0] = 1010.0
+    driver.note_own_position((45.0, 5.0))         # leaves area (0, 0)
+    now[0] = 1050.0
+    since = make_update(uuid=first.uuid, version=3, marked=(880260,), cleared=(), deadline=600)
+    assert source.publish_obstacle(since)         # while the driver is away
+    wait_for(lambda: seen_published(observer, since), what="v3 published")
+    now[0] = 1100.0
+    driver.note_own_position((5.0, 5.0))          # back: it missed area (0, 0) for 90 s
+    wait_for(lambda: [p for t, p in observer.on("CHN:" + catchup.channel((0, 0))) if driver.identity_id in t],
+             what="the driver's request for area (0, 0)")
+    asked = [p for t, p in observer.on("CHN:" + catchup.channel((0, 0))) if driver.identity_id in t]
+    assert asked[-1]["object"]["missedFor"] == 90.0
+    wait_for(lambda: answered(observer, source, asked[-1]["object"]["objectId"]), what="robot_0's answer")
+    assert answered(observer, source, asked[-1]["object"]["objectId"]) == [(first.uuid, 3)]
+    # a robot that never heard the area gets everything alive there
+    newcomer.note_own_position((5.0, 5.0))
+    wait_for(lambda: [p for t, p in observer.on("CHN:" + catchup.channel((0, 0))) if newcomer.identity_id in t],
+             what="the newcomer's request")
+    fresh = [p for t, p in observer.on("CHN:" + catchup.channel((0, 0))) if newcomer.identity_id in t][-1]
+    assert "missedFor" not in fresh["object"]
+    wait_for(lambda: answered(observer, source, fresh["object"]["objectId"]), what="robot_0's answer to the newcomer")
+    assert answered(observer, source, fresh["object"]["objectId"]) == [(first.uuid, 1), (first.uuid, 2),
+                                                                       (first.uuid, 3)]
+    assert driver.counters()["catchup_requests_since_left"] >= 1
+
+
+@pytest.mark.parametrize("sent_at, answered_", [(1005.0, True), (1004.9, False), (1100.0, True)])
+def test_an_update_sent_within_the_margin_before_the_robot_left_is_answered(sent_at, answered_):
+    # left 90 s before the request at 1100: what was sent from 1010 - MISSED_FOR_MARGIN (5 s) on may have been under way
+    assert catchup.answered_since(sent_at, 1100.0, 90.0) is answered_
+    assert catchup.answered_since(sent_at, 1100.0, None)
+
+
+@pytest.mark.parametrize("missed_for, error", [
+    (0, None), (catchup.MAX_MISSED_FOR, None), (-0.1, "out_of_range"), (catchup.MAX_MISSED_FOR + 1, "out_of_range"),
+    ("90", "wrong_type"), (True, "wrong_type"), ([90], "wrong_type")])
+def test_a_request_says_how_long_it_missed_the_area_within_bounds(missed_for, error):
+    correlation_id = str(uuidlib.uuid4())
+    data = json.loads(catchup.request_payload(correlation_id))
+    data["object"]["missedFor"] = missed_for
+    if error is None:
+        assert catchup.decode_request(data) == (correlation_id, float(missed_for))
+    else:
+        with pytest.raises(CoatyError) as raised:
+            catchup.decode_request(data)
+        assert raised.value.reason == error and "missedFor" in str(raised.value)
+
+
+@pytest.mark.broker
 def test_a_robot_stops_observing_an_area_once_its_updates_there_have_expired(make_client, make_update, observer,
                                                                              wait_for):
     now = [1000.0]
@@ -140,7 +205,9 @@ def test_bad_catch_up_requests_are_counted_and_dropped_and_a_good_one_is_still_a
            {"object": {"objectType": "org.fleetsharing.Other", "coreType": "CoatyObject",
                        "objectId": str(uuidlib.uuid4()), "name": "x"}},
            {"object": [1, 2]},
-           {"objects": []}]
+           {"objects": []},
+           {"object": {"objectType": catchup.OBJECT_TYPE, "coreType": "CoatyObject",
+                       "objectId": str(uuidlib.uuid4()), "name": "x", "missedFor": -5}}]
     for payload in bad:
         observer.publish(topic, json.dumps(payload))
     observer.publish(topic, b"\xff not json")
@@ -149,8 +216,9 @@ def test_bad_catch_up_requests_are_counted_and_dropped_and_a_good_one_is_still_a
     wait_for(lambda: observer.on("/RSV/%s/%s" % (source.identity_id, good)), what="the good request answered")
     counters = source.counters()
     dropped = {k: v for k, v in counters.items() if k.startswith("dropped.")}
-    assert sum(dropped.values()) == 5, dropped
+    assert sum(dropped.values()) == 6, dropped
     assert dropped.get("dropped.wrong_type") == 3 and dropped.get("dropped.missing_field") == 1, dropped
+    assert dropped.get("dropped.out_of_range") == 1, dropped
     assert counters["catchups_answered"] == 1
 
 

@@ -149,6 +149,9 @@ class CoatyBridgeClient(ConnectionMixin, HeartbeatMixin, OutgoingMixin, Incoming
         # requester's last request, requester -> (correlation id, its areas answered)
         self._catchup_areas = set()
         self._catchup_last = {}
+        # obstacle areas this robot stopped hearing -> clock time it left them: a catch-up on coming back asks only
+        # for what was sent since (catchup.py)
+        self._areas_left = {}
         # Obstacle areas (issue 29): uuid -> clock time at which the copies of robots that hear only
         # fleet-wide messages expire (the newest fleet-wide message's deadline), and this robot's pending
         # renewals, uuid -> (due, update, sent_at): its last area-scoped update, sent fleet-wide before

@@ -190,8 +190,9 @@ class OutgoingMixin:
             self._own_area = key
             old, self._area_subscriptions = self._area_subscriptions, wanted
             new_obstacle_areas = sorted(obstacle_areas - self._obstacle_areas)
-            self._obstacle_areas = obstacle_areas
             connected = self._connected
+            self._note_areas_left(self._obstacle_areas - obstacle_areas, connected)
+            self._obstacle_areas = obstacle_areas
             if connected:
                 # new ones first: a robot on the way in is heard from the first advert the broker has for it
                 added, gone = sorted(wanted - old), sorted(old - wanted)
@@ -221,9 +222,13 @@ class OutgoingMixin:
                 del entries[0]
                 self._counters["own_log_truncated"] += 1
 
-    def _replayable_own_updates(self):
+    def _replayable_own_updates(self, sent_since=None):
         """This robot's own updates still alive, aged to now, with what newer ones decided left out (replay.py);
-        expired ones are forgotten."""
+        expired ones are forgotten. ``sent_since``: only those sent at or after this clock time."""
+        return [u for u, _t in self._replayable_own_updates_sent(sent_since)]
+
+    def _replayable_own_updates_sent(self, sent_since=None):
+        """As _replayable_own_updates, each with the clock time it was sent."""
         now = self._clock()
         replay = []
         left_out = 0
@@ -232,9 +237,13 @@ class OutgoingMixin:
                 alive = [(u, t) for u, t in self._own_log[uuid] if lifetimes.aged(u, now - t) is not None]
                 if alive:
                     self._own_log[uuid] = alive
+                    sent_at = {}
+                    for u, t in alive:
+                        sent_at[u.version] = max(t, sent_at.get(u.version, t))
                     deciding = replays.deciding_updates([lifetimes.aged(u, now - t) for u, t in alive])
                     left_out += len(alive) - len(deciding)
-                    replay += deciding
+                    replay += [(u, sent_at[u.version]) for u in deciding
+                               if sent_since is None or sent_at[u.version] >= sent_since]
                 else:
                     del self._own_log[uuid]
             if left_out:
