@@ -47,6 +47,19 @@ def fleet_sharing():
     return bool(rospy.get_param("/fleet/sharing", rospy.get_param("/robot_0/move_base/sharing_enabled", True)))
 
 
+def must_hear(robots, listener, size):
+    """Names of the robots whose footprint adverts ``listener``'s bridge hears for sure at footprint_area_size
+    ``size``: every other one within size - 0.5 m along both axes (a footprint's centroid, which places its
+    advert, lies up to 0.5 m from the pose), or every other one without areas or before the poses are known."""
+    others = [r for r in robots if r is not listener]
+    here = listener.pose
+    if size <= 0 or here is None:
+        return [r.name for r in others]
+    reach = size - 0.5
+    return [r.name for r in others if r.pose is None
+            or (abs(r.pose[0] - here[0]) <= reach and abs(r.pose[1] - here[1]) <= reach)]
+
+
 class ScenarioError(Exception):
     """A scenario step could not be carried out (bad goal name, service refused, ...)."""
 
@@ -430,9 +443,20 @@ class Fleet:
                 rospy.wait_for_service(r.list_srv.resolved_name, timeout)
             # A robot's layer never shares the robots its bridge hears; one that moves before the others' footprint
             # adverts reached it may see them as obstacles (robot_1 shared robot_0 1.3 s after the start of Test 1).
-            names = {r.name for r in self.robots}
-            self.wait_until(lambda: all(names - {r.name} <= set(r.fleet_robot_names()) for r in self.robots),
-                            timeout, "every robot's bridge to hear every other robot's footprint")
+            # A bridge hears the robots in the 3 x 3 footprint squares around its own: those within the square's
+            # size along both axes for sure (farther ones it need not hear: no sensor of its robot reaches them).
+            size = self.footprint_area_size()
+            self.wait_until(lambda: all(set(must_hear(self.robots, r, size)) <= set(r.fleet_robot_names())
+                                        for r in self.robots),
+                            timeout, "every robot's bridge to hear the robots within footprint_area_size %g m of it"
+                            % size)
+
+    def footprint_area_size(self):
+        """The bridges' footprint_area_size (the same on every robot of a fleet): robot_0's, else the default."""
+        from coaty_bridge.client import BridgeConfig
+        return float(rospy.get_param("/%s/coaty_bridge/footprint_area_size" % self.robots[0].name,
+                                     BridgeConfig("x").footprint_area_size))
+
 
     def block_size(self, name):
         try:
