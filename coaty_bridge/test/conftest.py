@@ -57,13 +57,22 @@ def broker():
 
 
 @pytest.fixture
-def make_client(broker):
+def obstacle_area_m():
+    """The obstacle_area_size of make_client's clients: None, the bridge's default. A test module whose positions are
+    laid out for another size overrides this fixture."""
+    return None
+
+
+@pytest.fixture
+def make_client(broker, obstacle_area_m):
     """Factory for started CoatyBridgeClients on the test broker; all are stopped after."""
     from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
     clients = []
 
     def make(robot_name, received=None, start=True, clock=None, **config):
         config.setdefault("broker_url", broker.url)
+        if obstacle_area_m is not None:
+            config.setdefault("obstacle_area_size", obstacle_area_m)
         sink = received if received is not None else []
         extra = {} if clock is None else {"clock": clock}   # an injected clock: now[0] of the test's own list
         client = CoatyBridgeClient(BridgeConfig(robot_name, **config), lambda u, t: sink.append(u), **extra)

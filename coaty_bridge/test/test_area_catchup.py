@@ -21,12 +21,8 @@ FAR_AREA_RECT, FAR_AREA_CELL = (44.0, 44.0, 45.0, 45.0), 1285 * 2000 + 1085
 
 
 @pytest.fixture
-def make_client(make_client):
-    """The conftest's make_client with this file's AREA_M obstacle squares, unless a test says otherwise."""
-    def make(robot_name, **config):
-        config.setdefault("obstacle_area_size", AREA_M)
-        return make_client(robot_name, **config)
-    return make
+def obstacle_area_m():
+    return AREA_M
 
 
 def versions(client, uuid):

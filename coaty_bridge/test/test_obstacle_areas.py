@@ -20,12 +20,8 @@ NEAR, FAR = (12.0, 5.0), (45.0, 5.0)
 
 
 @pytest.fixture
-def make_client(make_client):
-    """The conftest's make_client with this file's AREA_M obstacle squares, unless a test says otherwise."""
-    def make(robot_name, **config):
-        config.setdefault("obstacle_area_size", AREA_M)
-        return make_client(robot_name, **config)
-    return make
+def obstacle_area_m():
+    return AREA_M
 
 
 def versions(client, uuid):
