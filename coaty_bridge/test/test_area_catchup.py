@@ -281,3 +281,13 @@ def test_one_more_requester_and_the_memory_starts_again():
     buckets forget the oldest requester beyond the same number) and is answered."""
     client, (requester, correlation_id) = _catchup_memory_after(catchup.MAX_REQUESTERS + 1)
     assert client._catchup_allowed(requester, correlation_id, (0, 0))
+
+
+@pytest.mark.parametrize("more, kept", [(1, catchup.MAX_AREAS_LEFT), (2, 2)])
+def test_a_robot_remembers_when_it_left_at_most_max_areas_left_areas(more, kept):
+    client = CoatyBridgeClient(BridgeConfig("robot_0"), lambda u, t: None, clock=lambda: 1000.0)   # never started
+    client._note_areas_left({(i, 0) for i in range(catchup.MAX_AREAS_LEFT - 1)}, connected=True)
+    client._note_areas_left({(-i, 1) for i in range(more)}, connected=True)
+    assert len(client._areas_left) == kept   # beyond the bound the memory starts again: the next catch-ups ask all
+    client._note_areas_left({(-1, -1)}, connected=False)
+    assert (-1, -1) not in client._areas_left   # left while offline: the reconnect's Discover asks for everything

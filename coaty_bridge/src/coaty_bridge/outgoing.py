@@ -222,12 +222,12 @@ class OutgoingMixin:
                 del entries[0]
                 self._counters["own_log_truncated"] += 1
 
-    def _replayable_own_updates(self, sent_since=None):
+    def _replayable_own_updates(self):
         """This robot's own updates still alive, aged to now, with what newer ones decided left out (replay.py);
-        expired ones are forgotten. ``sent_since``: only those sent at or after this clock time."""
-        return [u for u, _t in self._replayable_own_updates_sent(sent_since)]
+        expired ones are forgotten."""
+        return [u for u, _t in self._replayable_own_updates_sent()]
 
-    def _replayable_own_updates_sent(self, sent_since=None):
+    def _replayable_own_updates_sent(self):
         """As _replayable_own_updates, each with the clock time it was sent."""
         now = self._clock()
         replay = []
@@ -242,8 +242,7 @@ class OutgoingMixin:
                         sent_at[u.version] = max(t, sent_at.get(u.version, t))
                     deciding = replays.deciding_updates([lifetimes.aged(u, now - t) for u, t in alive])
                     left_out += len(alive) - len(deciding)
-                    replay += [(u, sent_at[u.version]) for u in deciding
-                               if sent_since is None or sent_at[u.version] >= sent_since]
+                    replay += [(u, sent_at[u.version]) for u in deciding]
                 else:
                     del self._own_log[uuid]
             if left_out:
