@@ -95,8 +95,9 @@ class BridgeConfig:
     source_message_rate: float = 100.0
     source_message_burst: int = 1000
     source_queue_size: int = 1000
-    # s: end-to-end liveness (liveness.py): an echo (only we receive it) this often, ERROR when it is
-    # not echoed for liveness_timeout s (issue 27, attack 6); a heartbeat every peer receives each
+    # s: end-to-end liveness (liveness.py): a tick this often, with an echo (only we receive it) unless
+    # all we sent is back; ERROR when nothing sent at or after a tick is back within liveness_timeout
+    # s (issue 27, attack 6); a heartbeat every peer receives each
     # peer_heartbeat_interval s (0: automatic, 3 s per peer known, at least heartbeat_interval;
     # issue 29), WARN when a peer's is missing for 3 of its intervals (at least liveness_timeout)
     heartbeat_interval: float = 1.0

@@ -29,6 +29,9 @@ class HeartbeatMixin:
         if not self._connected:
             return None
         seq, peer = self.liveness.next_heartbeat(peer=True if leaving else None)
+        if seq is None:
+            self._count("echoes_skipped")   # all we sent is back; what we send next vouches for this tick
+            return None
         if peer is None:
             self._send(self._echo_topic, liveness_rules.echo_payload(self.identity_id, seq), queue=False)
             self._count("echoes_sent")

@@ -144,6 +144,7 @@ class IncomingMixin:
                 return
             if topic.source_id == self.identity_id:
                 self._count("echoes_suppressed")
+                self.liveness.own_returned(topic_text, payload)   # proves the path as an echo does
                 return
             if topic.namespace != self.config.namespace:
                 self._count("ignored")

@@ -21,7 +21,12 @@ heard, cost each robot 2.75 MB per minute at 100 robots):
 Each bridge checks:
 
 - **own echo**: its newest echo or peer heartbeat came back within ``liveness_timeout`` s of being
-  sent; otherwise the path to or from the broker is stalled (ERROR);
+  sent; otherwise the path to or from the broker is stalled (ERROR). An echo is not sent at a tick
+  when everything up to the last one is back (``next_heartbeat`` says so): the tick still counts,
+  and whatever is sent next (an obstacle update or advert coming back in our own areas, or the next
+  tick's echo) must be back within ``liveness_timeout`` of that tick. A stall is found as soon as
+  before; an idle robot echoes every other tick, and one whose own messages come back each tick
+  echoes none;
 - **peers**: every peer heard before (or named in ``known_robots``) was heard within
   ``peer_timeout(its announced interval)`` = max(liveness_timeout, PEER_TIMEOUT_INTERVALS x
   interval); otherwise it is partitioned from us or down without a leaving heartbeat (WARN). A
@@ -32,6 +37,7 @@ Each bridge checks:
 
 Pure Python, no paho; the clock is injected (tests advance it, nothing sleeps).
 """
+import collections
 import json
 import random
 import threading
@@ -68,6 +74,9 @@ MAX_MISSES_SENT = 200
 MAX_LIST = 1000
 # peers tracked at most (names from unauthenticated senders must not grow memory without bound)
 MAX_PEERS = 10000
+# own messages (other than heartbeats) remembered until they come back: the oldest are forgotten
+# first (those the broker does not send back to us at all, e.g. a Resolve to somebody's Discover)
+MAX_OWN_AWAITED = 256
 
 
 def echo_namespace(namespace):
@@ -118,8 +127,10 @@ class Liveness:
         self._seq = 0
         self._sent = {}            # seq -> time sent (the last few)
         self._last_sent = None
-        self._last_echo = None     # time the newest echo arrived
+        self._last_echo = None     # time the newest echo (or other own message) came back
         self._echoed_seq = 0
+        self._skipped_at = None    # a tick whose echo was not sent, until something sent since is back
+        self._awaited = collections.OrderedDict()   # (topic, payload) of own messages -> time sent
         self._rng = rng or random.Random()
         # time the next peer heartbeat is due (None: now); the first after listening (automatic interval)
         self._next_peer = None if self.fixed_peer_interval > 0 else \
@@ -153,13 +164,19 @@ class Liveness:
         wakes once per heartbeat_interval)."""
         now = self._clock()
         with self._lock:
+            if peer is None:
+                peer = self._next_peer is None or now >= self._next_peer - 0.5 * self.heartbeat_interval
+            if not peer and self._skipped_at is None and self._last_echo is not None \
+                    and self._echoed_seq == self._seq:
+                # everything sent so far is back: this tick needs no echo of its own. Whatever is
+                # sent next proves it (status() judges the tick as if its echo had gone out)
+                self._skipped_at = now
+                return None, None
             self._seq += 1
             self._sent[self._seq] = now
             for old in [s for s in self._sent if s < self._seq - 64]:
                 del self._sent[old]
             self._last_sent = now
-            if peer is None:
-                peer = self._next_peer is None or now >= self._next_peer - 0.5 * self.heartbeat_interval
             if not peer:
                 return self._seq, None
             self._interval = self._peer_interval_locked()
@@ -185,7 +202,33 @@ class Liveness:
         with self._lock:
             if seq in self._sent and seq > self._echoed_seq:
                 self._echoed_seq = seq
-                self._last_echo = now
+                self._back(self._sent[seq], now)
+
+    def own_sent(self, topic, payload):
+        """An own message other than a heartbeat went out: when it comes back (own_returned), it
+        proves the path as an echo does. A repeat keeps the first time sent: the copy that comes
+        back first must not vouch for a later send."""
+        now = self._clock()
+        with self._lock:
+            self._awaited.setdefault((topic, payload), now)
+            while len(self._awaited) > MAX_OWN_AWAITED:
+                self._awaited.popitem(last=False)
+
+    def own_returned(self, topic, payload):
+        """An own message came back from the broker (in our own areas). True when it was awaited."""
+        now = self._clock()
+        with self._lock:
+            sent = self._awaited.pop((topic, payload), None)
+            if sent is None:
+                return False
+            self._back(sent, now)
+            return True
+
+    def _back(self, sent, now):
+        # lock held: something sent at `sent` came back at `now`
+        self._last_echo = now
+        if self._skipped_at is not None and sent >= self._skipped_at:
+            self._skipped_at = None
 
     def peer(self, robot, interval=LEGACY_INTERVAL, misses=(), heard=None, hears=None):
         """A peer's heartbeat: its announced interval and misses, or (a sender of the first design)
@@ -228,6 +271,8 @@ class Liveness:
             self._started = self._clock()
             self._last_echo = None
             self._next_peer = None
+            self._skipped_at = None
+            self._awaited.clear()
 
     # ----------------------------------------------------------- verdict
 
@@ -239,6 +284,8 @@ class Liveness:
             level = OK
             # the oldest heartbeat not echoed yet
             pending = [t for s, t in self._sent.items() if s > self._echoed_seq]
+            if self._skipped_at is not None:
+                pending.append(self._skipped_at)
             if pending and now - min(pending) > self.timeout:
                 level = ERROR
                 since = "never" if self._last_echo is None else "%.1f s ago" % (now - self._last_echo)

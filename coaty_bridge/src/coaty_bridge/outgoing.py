@@ -258,6 +258,9 @@ class OutgoingMixin:
         with the time it was queued, so its deadline is aged when it finally goes out."""
         with self._lock:
             if self._connected:
+                if topic != self._echo_topic and topic != self._heartbeat_topic:
+                    # before publishing: it may be back before publish() returns
+                    self.liveness.own_sent(topic, payload)
                 info = self._mqtt.publish(topic, payload, qos=self._qos)
                 if info.rc == mqtt.MQTT_ERR_SUCCESS:
                     return
