@@ -9,6 +9,7 @@ without ROS) and real bridge clients:
 - mosquitto killed under run_broker comes back on the same port, and the robots with it.
 The log parser alone on mosquitto 2.0's own lines is tested first (pure)."""
 import functools
+import json
 import os
 import signal
 import subprocess
@@ -19,6 +20,7 @@ import pytest
 
 from coaty_bridge import logins
 from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge.errors import OutOfRangeError, WrongTypeError
 from coaty_bridge.identity import identity_for
 from coaty_bridge.security import FleetCredentials, read_password_file
 
@@ -58,6 +60,34 @@ def test_the_log_tells_each_second_connection_under_a_robots_login_and_no_other(
     shown.note(alerts[1])
     assert shown.status()[0] == 2, "repeated: ERROR"
     assert shown.note(logins.LoginAlert("LOGIN_A", "Coatyaaaa1111", "x", ("Coatyaaaa1111",), 0.0)) is None
+
+
+def _alert_data(**fields):
+    obj = json.loads(logins.LoginAlert("LOGIN_A", "peer-1", "127.0.0.1:44477", ("Coatyaaaa1111", "peer-1"),
+                                       1795903988.0).payload("5b8a2a3e-1111-4222-8333-444455556666"))
+    obj["object"].update(fields)
+    return obj
+
+
+def test_a_received_alert_is_read_back_and_each_size_is_checked_at_its_limit():
+    assert logins.LoginAlert.from_payload(_alert_data()).clients == ("Coatyaaaa1111", "peer-1")
+    text, clients = logins.MAX_ALERT_TEXT, logins.MAX_ALERT_CLIENTS
+    for field in ("login", "clientId", "address"):
+        logins.LoginAlert.from_payload(_alert_data(**{field: "a" * text}))          # just inside
+        for bad in ("a" * (text + 1), "", 7, None):                                   # just outside, and wrong
+            with pytest.raises(OutOfRangeError):
+                logins.LoginAlert.from_payload(_alert_data(**{field: bad}))
+    logins.LoginAlert.from_payload(_alert_data(clients=["c%d" % i for i in range(clients)]))
+    logins.LoginAlert.from_payload(_alert_data(clients=["a" * text]))
+    for bad in (["c%d" % i for i in range(clients + 1)], [], ["a" * (text + 1)], [3], "peer-1"):
+        with pytest.raises(OutOfRangeError):
+            logins.LoginAlert.from_payload(_alert_data(clients=bad))
+    for bad in (True, "1795903988", None):
+        with pytest.raises(OutOfRangeError):
+            logins.LoginAlert.from_payload(_alert_data(stamp=bad))
+    for data in ({}, [], {"object": {"objectType": "other"}}):
+        with pytest.raises(WrongTypeError):
+            logins.LoginAlert.from_payload(data)
 
 
 class Fleet:

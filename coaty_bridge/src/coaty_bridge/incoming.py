@@ -18,6 +18,13 @@ LOG = logging.getLogger("coaty_bridge.client")
 
 #: Agents (sourceIds) whose robot names are remembered; one withdrawn by a Deadvertise is forgotten.
 _MAX_KNOWN_AGENTS = 4096
+# what a bridge remembers per sender is bounded: names and topics from unauthenticated senders must
+# not grow memory without bound. Topics admitted (then forgotten all at once, a flood repeats one),
+# footprint senders (new ones beyond it are not remembered for their Deadvertise) and robots warned
+# about another area size (beyond it: counted, not warned)
+MAX_ADMIT_CACHE = 4096
+MAX_FOOTPRINT_SENDERS = 4096
+MAX_AREA_MISMATCH_WARNED = 4096
 #: Longest the worker waits, per message it handled, while paho has unread messages in the socket (s): a continuous
 #: flood still leaves it at least 1 / READ_FIRST messages a second.
 READ_FIRST = 0.005
@@ -56,7 +63,7 @@ class IncomingMixin:
             key = topic.source_id or ""
             limited = topic.event == "ADV" and topic.object_type is not None and key != self.identity_id \
                 and areas.is_scoped_object_type(topic.object_type, self.config.object_type)
-            if len(self._admit_cache) >= 4096:
+            if len(self._admit_cache) >= MAX_ADMIT_CACHE:
                 self._admit_cache.clear()
             known = self._admit_cache[topic_text] = (key, limited)   # a flood repeats one topic
         key, limited = known
@@ -166,7 +173,8 @@ class IncomingMixin:
                 self._check_footprint_area(footprint, topic)
                 if self._deliver_footprint(footprint, topic):
                     with self._lock:
-                        if len(self._footprint_senders) < 4096 or topic.source_id in self._footprint_senders:
+                        if len(self._footprint_senders) < MAX_FOOTPRINT_SENDERS \
+                                or topic.source_id in self._footprint_senders:
                             self._footprint_senders[topic.source_id] = (footprint.robot,
                                                                         data["object"]["objectId"].lower())
             elif topic.event == "CHN" and topic.filter == renewals.CHANNEL:
@@ -276,7 +284,8 @@ class IncomingMixin:
             return
         self._count("footprint_area_mismatches")
         with self._lock:
-            if footprint.robot in self._area_mismatch_warned or len(self._area_mismatch_warned) >= 4096:
+            if footprint.robot in self._area_mismatch_warned \
+                    or len(self._area_mismatch_warned) >= MAX_AREA_MISMATCH_WARNED:
                 return
             self._area_mismatch_warned.add(footprint.robot)
         LOG.warning("%s: robot %r (sourceId %s) advertises its footprint at (%.2f, %.2f) under square %s, but at our "

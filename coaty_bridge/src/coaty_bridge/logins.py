@@ -29,6 +29,9 @@ OBJECT_TYPE = "org.fleetsharing.LoginAlert"
 ALERT_WINDOW = 600.0
 #: alerts within ALERT_WINDOW that make it an ERROR: repeated attempts
 ALERTS_FOR_ERROR = 2
+#: characters of a received alert's login, clientId, address and each client id, and client ids listed, at most
+MAX_ALERT_TEXT = 256
+MAX_ALERT_CLIENTS = 100
 
 _CONNECTED = re.compile(r"New client connected from (?P<address>\S+) as (?P<client>\S+) \(.*\bu'(?P<login>[^']*)'\)")
 _LEFT = re.compile(r"Client (?P<client>\S+) (?:disconnected|closed its connection|has exceeded timeout)")
@@ -61,9 +64,9 @@ class LoginAlert:
             raise WrongTypeError("login alert without a %s object" % OBJECT_TYPE)
         fields = [obj.get(k) for k in ("login", "clientId", "address", "clients", "stamp")]
         login, client_id, address, clients, stamp = fields
-        if not all(isinstance(v, str) and 0 < len(v) <= 256 for v in (login, client_id, address)) \
-                or not isinstance(clients, list) or not 1 <= len(clients) <= 100 \
-                or not all(isinstance(c, str) and len(c) <= 256 for c in clients) \
+        if not all(isinstance(v, str) and 0 < len(v) <= MAX_ALERT_TEXT for v in (login, client_id, address)) \
+                or not isinstance(clients, list) or not 1 <= len(clients) <= MAX_ALERT_CLIENTS \
+                or not all(isinstance(c, str) and len(c) <= MAX_ALERT_TEXT for c in clients) \
                 or isinstance(stamp, bool) or not isinstance(stamp, (int, float)):
             raise OutOfRangeError("login alert fields login, clientId, address, clients, stamp: wrong types or sizes")
         return cls(login, client_id, address, tuple(clients), float(stamp))
