@@ -1,8 +1,5 @@
 """Every numeric range of the bridge's parameters and of a received heartbeat, just inside and just outside: a
-limit moved by one step (``<=`` for ``<``, a bound off by one) turns one of these red. Pure: no broker, no ROS.
-
-The bridge node's ``subscriber_wait`` (0..3600 s) is checked inside node.main(), after rospy.init_node, with no
-pure function to call: it is not tested here."""
+limit moved by one step (``<=`` for ``<``, a bound off by one) turns one of these red. Pure: no broker, no ROS master."""
 import json
 
 import pytest
@@ -210,3 +207,15 @@ def test_a_heartbeats_announced_interval_is_within_the_announced_bounds(interval
 def test_a_heartbeats_heard_count_is_0_to_a_million(heard, accepted):
     """``heard`` sizes a joining robot's first interval: a count no fleet reaches is refused, not believed."""
     assert _taken(_heartbeat(heard=heard)) is accepted
+
+
+@pytest.mark.parametrize("value,accepted", [(0, True), (-0.001, False), (3600, True), (3600.001, False),
+                                            (True, False), ("10", False)])
+def test_the_bridge_node_waits_0_to_3600_s_for_its_subscribers(value, accepted):
+    """How long the node waits for the handler to subscribe before it connects (node.main's ~subscriber_wait)."""
+    from coaty_bridge.node import checked_subscriber_wait
+    if accepted:
+        assert checked_subscriber_wait(value) == float(value)
+    else:
+        with pytest.raises(ValueError, match=r"parameter subscriber_wait = .*: must be 0\.\.3600 seconds"):
+            checked_subscriber_wait(value)

@@ -523,6 +523,16 @@ class BridgeNode:
         self.diagnostics.publish(array)
 
 
+MAX_SUBSCRIBER_WAIT = 3600.0
+
+
+def checked_subscriber_wait(value):
+    """~subscriber_wait in s, 0..MAX_SUBSCRIBER_WAIT; a ValueError naming it otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_SUBSCRIBER_WAIT:
+        raise ValueError("parameter subscriber_wait = %r: must be 0..%g seconds" % (value, MAX_SUBSCRIBER_WAIT))
+    return float(value)
+
+
 def main():
     rospy.init_node("coaty_bridge")
     handler = RosoutHandler()
@@ -534,15 +544,12 @@ def main():
     try:
         config, _choice = read_config()
         footprint_config = FootprintConfig.from_params()
-        subscriber_wait = rospy.get_param("~subscriber_wait", 10.0)
-        if isinstance(subscriber_wait, bool) or not isinstance(subscriber_wait, (int, float)) \
-                or not 0 <= subscriber_wait <= 3600:
-            raise ValueError("parameter subscriber_wait = %r: must be 0..3600 seconds" % (subscriber_wait,))
+        subscriber_wait = checked_subscriber_wait(rospy.get_param("~subscriber_wait", 10.0))
     except ValueError as err:
         rospy.logfatal("coaty_bridge: bad parameter: %s", err)
         sys.exit(2)
     node = BridgeNode(config, footprint_config)
     publisher_links.start_watch(rospy.get_name())
     rospy.on_shutdown(node.shutdown)
-    node.start(float(subscriber_wait))
+    node.start(subscriber_wait)
     rospy.spin()
