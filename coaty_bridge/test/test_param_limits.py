@@ -1,5 +1,6 @@
 """Every numeric range of the bridge's parameters and of a received heartbeat, just inside and just outside: a
-limit moved by one step (``<=`` for ``<``, a bound off by one) turns one of these red. Pure: no broker, no ROS master."""
+limit moved by one step (``<=`` for ``<``, a bound off by one) turns one of these red. Pure: no broker, no ROS
+master."""
 import json
 
 import pytest
