@@ -6,11 +6,11 @@ Two kinds of Coaty Channel events, which Coaty agents that do not observe these 
 (issue 29: the first design, a 1 s heartbeat from every robot to every robot listing all robots
 heard, cost each robot 2.75 MB per minute at 100 robots):
 
-- an **echo** each ``heartbeat_interval`` s on ``coaty/3/<ns>.echo/CHN:org.fleetsharing.Echo/<own
+- an **echo** at most each ``heartbeat_interval`` s on ``coaty/3/<ns>.echo/CHN:org.fleetsharing.Echo/<own
   sourceId>``, which only its sender subscribes to (that exact topic; its own namespace, so that a
   wildcard subscription of the fleet's namespace does not catch it): a minimal CoatyObject with a
   sequence number.
-  Peers never receive it, so it costs each robot only its own ~150 bytes per interval;
+  Peers never receive it, so it costs each robot only its own ~150 bytes per interval, at most;
 - a **peer heartbeat** on ``CHN:org.fleetsharing.Heartbeat/<sourceId>``, which every bridge
   observes, each ``peer_interval`` s: by default ``AUTO_SECONDS_PER_PEER`` s per peer known
   (floor: ``heartbeat_interval``), so what each robot receives of them stays about the same however
@@ -50,7 +50,8 @@ ECHO_OBJECT_TYPE = "org.fleetsharing.Echo"
 
 # automatic peer heartbeat interval (peer_heartbeat_interval 0): this many s per peer known. Each
 # robot then receives about one peer heartbeat per 0.9 x AUTO_SECONDS_PER_PEER s (~220 bytes each:
-# ~4.9 kB/min) at any fleet size; with the 1 s echo (~8.6 kB/min) below the 15 kB/min budget.
+# ~4.9 kB/min) at any fleet size; with the echo (an idle robot's every other 1 s tick: ~4.3 kB/min) below the
+# 15 kB/min budget.
 AUTO_SECONDS_PER_PEER = 3.0
 # the next peer heartbeat goes out after a random JITTER..1 of the interval (which is announced as
 # the longest wait): robots that started or reconnected together do not stay in step
