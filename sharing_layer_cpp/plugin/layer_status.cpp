@@ -249,6 +249,7 @@ void SharingLayer::diagnosePlanAndMap(diagnostic_updater::DiagnosticStatusWrappe
   status.add("plan topics", plan_topics_.empty() ? std::string("none (plan trigger off)") : joined(plan_topics_));
   status.add("plan publishers", plan_publishers);
   status.add("plans received", plans_received_);
+  status.add("plans out of the local planner's reach", plans_out_of_reach_);
   status.add("last plan", since_plan < 0.0 ? std::string("never") : std::to_string(since_plan) + " s ago");
   const bool plan_alive = !plan_topics_.empty() && (plan_publishers > 0 || (since_plan >= 0.0 && since_plan < 60.0));
   status.add("plan trigger alive", plan_alive);

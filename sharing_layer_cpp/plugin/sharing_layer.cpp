@@ -412,6 +412,30 @@ void SharingLayer::planCallback(const nav_msgs::Path::ConstPtr& msg)
     poses.emplace_back(pose.pose.position.x, pose.pose.position.y);  // non-finite ones are dropped by the core
   }
   core_->setPlan(poses);
+  warnPlanOutOfReach(poses);
+}
+
+void SharingLayer::warnPlanOutOfReach(const std::vector<std::pair<double, double>>& poses)
+{
+  if (!have_robot_pose_ || poses.empty())
+  {
+    return;
+  }
+  const double gap = nearestPlanDistance(poses, robot_x_, robot_y_);
+  if (!outOfLocalPlannerReach(gap))
+  {
+    return;
+  }
+  ++plans_out_of_reach_;
+  ROS_WARN_THROTTLE(30.0,
+                    "SharingLayer (%s): the global plan (%zu poses, first at (%.2f, %.2f)) passes no nearer than "
+                    "%.2f m to the robot at (%.2f, %.2f): move_base's local planner keeps a plan only from a pose "
+                    "within %.1f m, so the robot will not move and move_base aborts (\"no valid control\"). NavfnROS "
+                    "returns a route longer than twice the global costmap's width cut short like this, and a shared "
+                    "obstacle can make the route that long: use global_planner/GlobalPlanner, or a global costmap at "
+                    "least half as wide as the longest route [%lu such plans]",
+                    params_.robot_name.c_str(), poses.size(), poses.front().first, poses.front().second, gap, robot_x_,
+                    robot_y_, kLocalPlannerPlanReach, plans_out_of_reach_);
 }
 
 void SharingLayer::handleTrigger(const TriggerReport& report, double now)
@@ -452,6 +476,9 @@ void SharingLayer::updateBounds(double robot_x, double robot_y, double robot_yaw
 
   std::lock_guard<std::mutex> lock(core_mutex_);
   sources_current_ = current_;
+  have_robot_pose_ = true;
+  robot_x_ = robot_x;
+  robot_y_ = robot_y;
   applyPendingReconfigure();  // dynamic_reconfigure's accepted changes, from this cycle on
   if (!core_)
   {

@@ -95,6 +95,8 @@ private:
   void sharedCallback(const sharing_msgs::SharedObstacle::ConstPtr& msg);
   void expiredCallback(const std_msgs::String::ConstPtr& msg);
   void planCallback(const nav_msgs::Path::ConstPtr& msg);
+  /// @brief WARN (throttled) and count when no pose of the plan lies within kLocalPlannerPlanReach of the robot
+  void warnPlanOutOfReach(const std::vector<std::pair<double, double>>& poses);
   void mapCallback(const nav_msgs::OccupancyGrid::ConstPtr& msg);
   void fleetRobotsCallback(const sharing_msgs::RobotFootprintArray::ConstPtr& msg);
   /// @brief move_base's action status: the plan trigger follows the global plan only while a goal is active
@@ -212,6 +214,10 @@ private:
   bool static_seen_ = false;                ///< the static layer's map was read at least once
   bool sources_current_ = true;             ///< ObstacleLayer's current_ at the last cycle
   unsigned long plans_received_ = 0;
+  unsigned long plans_out_of_reach_ = 0;    ///< plans with no pose within kLocalPlannerPlanReach of the robot
+  bool have_robot_pose_ = false;            ///< robot_x_, robot_y_: the pose of the last updateBounds
+  double robot_x_ = 0.0;
+  double robot_y_ = 0.0;
   ros::Time last_plan_;
   unsigned long proposals_published_ = 0;
   unsigned long updates_published_ = 0;

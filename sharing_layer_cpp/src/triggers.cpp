@@ -339,6 +339,19 @@ void Triggers::explainNothing(TriggerReport& report, double robot_x, double robo
 
 // --- The plan-blocked trigger ---
 
+double nearestPlanDistance(const std::vector<std::pair<double, double>>& plan, double robot_x, double robot_y)
+{
+  double best = kInf;
+  for (const auto& pose : plan)
+  {
+    if (std::isfinite(pose.first) && std::isfinite(pose.second))
+    {
+      best = std::min(best, std::hypot(pose.first - robot_x, pose.second - robot_y));
+    }
+  }
+  return best;
+}
+
 bool Triggers::setPlan(const std::vector<std::pair<double, double>>& poses)
 {
   plan_.clear();

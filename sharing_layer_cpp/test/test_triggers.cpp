@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -334,6 +335,33 @@ TEST(TriggerReasons, DebouncedStaticAndAlreadyShared)
 }
 
 // --- D: plan-blocked trigger ------------------------------------------------------------------------------
+
+// The dead-end world, five robots, seed 2, sharing on: NavfnROS cut robot_1's 36 m detour at 1,280 half-cell steps,
+// so its plan began at (14.02, 1.96), 1.37 m from the robot at (15.0, 1.0), and went left from there.
+TEST(PlanReach, APlanCutShortBeforeTheRobotIsOutOfTheLocalPlannersReach)
+{
+  std::vector<std::pair<double, double>> cut;
+  for (double x = 14.02; x > 2.0; x -= 0.05)
+  {
+    cut.emplace_back(x, 1.96);
+  }
+  EXPECT_NEAR(nearestPlanDistance(cut, 15.0, 1.0), std::hypot(0.98, 0.96), 1e-9);
+  EXPECT_TRUE(outOfLocalPlannerReach(nearestPlanDistance(cut, 15.0, 1.0)));
+  std::vector<std::pair<double, double>> whole = {{15.0, 1.0}, {14.5, 1.5}};
+  whole.insert(whole.end(), cut.begin(), cut.end());
+  EXPECT_DOUBLE_EQ(nearestPlanDistance(whole, 15.0, 1.0), 0.0);
+  EXPECT_FALSE(outOfLocalPlannerReach(nearestPlanDistance(whole, 15.0, 1.0)));
+}
+
+TEST(PlanReach, TheReachIsOneMetreAndPosesThatAreNotFiniteDoNotCount)
+{
+  EXPECT_FALSE(outOfLocalPlannerReach(kLocalPlannerPlanReach));         // just inside: base_local_planner keeps it
+  EXPECT_TRUE(outOfLocalPlannerReach(kLocalPlannerPlanReach + 1e-6));   // just outside
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_TRUE(std::isinf(nearestPlanDistance({}, 0.0, 0.0)));
+  EXPECT_TRUE(std::isinf(nearestPlanDistance({{nan, 0.0}, {0.0, std::numeric_limits<double>::infinity()}}, 0.0, 0.0)));
+  EXPECT_DOUBLE_EQ(nearestPlanDistance({{nan, 0.0}, {3.0, 4.0}, {6.0, 8.0}}, 0.0, 0.0), 5.0);
+}
 
 TEST(PlanTrigger, NewCellsOnThePlanAheadProposeTheClusterOnThePlan)
 {

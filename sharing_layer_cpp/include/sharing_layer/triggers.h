@@ -103,6 +103,17 @@ struct TriggerInputs
   const LastScan& last;           ///< what the last scan marked
 };
 
+/// m: base_local_planner's prunePlan (TrajectoryPlannerROS, and DWA with prune_plan) keeps a global plan from its
+/// first pose within this distance of the robot on, and drops all of it when no pose is that near
+constexpr double kLocalPlannerPlanReach = 1.0;
+
+/// @brief Distance from (robot_x, robot_y) to the nearest finite pose of `plan`; infinity when it has none. Above
+/// kLocalPlannerPlanReach move_base's local planner finds no valid control: NavfnROS, for one, returns a route
+/// longer than twice its costmap's width cut short, starting part of the way along.
+double nearestPlanDistance(const std::vector<std::pair<double, double>>& plan, double robot_x, double robot_y);
+/// @brief Whether a plan whose nearest pose is `gap` m from the robot is dropped by move_base's local planner
+inline bool outOfLocalPlannerReach(double gap) { return gap > kLocalPlannerPlanReach; }
+
 /**
  * @brief When this robot proposes an obstacle to the fleet, and what:
  * - the stuck triggers (stuck_feedback, recovery_status, manual), one debounce window for all of them;
