@@ -1,34 +1,23 @@
 """Each numeric limit on evidence (issues 43 and 46; coaty_bridge/evidence.py, codec.check_evidence and
 sharing_msgs.authority.EvidenceRule) just inside and just outside, where test_evidence_in.py, test_evidence_out.py
 and test_param_limits.py leave a side unchecked. Pure: no broker, no ROS master."""
-import json
 import logging
 import math
 import uuid as uuidlib
 
 import pytest
 
-from coaty_bridge import codec, footprint as footprints
-from coaty_bridge.client import BridgeConfig, CoatyBridgeClient
+from coaty_bridge import codec
 from coaty_bridge.topics import Topic
 from sharing_msgs.authority import EvidenceRule
 
-OT = codec.DEFAULT_OBJECT_TYPE
-STAMP = 1700000000.5
-REACH = 4.0
-WINDOW = 2.0
+from test_evidence_in import OT, REACH, STAMP, cell_at, receiver  # noqa: F401 - the fixture
+from test_evidence_out import WINDOW, bridge, footprint  # noqa: F401 - the fixture
+
 STEP = 0.01
 #: evidence.EVIDENCE_WAIT and a uint32's largest value, stated here so that changing a bound fails a test
 EVIDENCE_WAIT = 5.0
 MAX_UINT32 = 4294967295.0
-
-
-class Clock:
-    def __init__(self):
-        self.now = 5000.0
-
-    def __call__(self):
-        return self.now
 
 
 # ------------------------------------------------------------------ codec.check_evidence: the field's ranges
@@ -80,19 +69,6 @@ def test_evidence_rule_slack_is_0_to_its_cap(name, value, accepted):
 
 # ------------------------------------------------------------------ evidence.py: radius cap on received evidence
 
-@pytest.fixture
-def receiver():
-    got = []
-    client = CoatyBridgeClient(BridgeConfig("robot_1", require_evidence=True, sensor_reach=REACH,
-                                            max_sensor_reach=REACH), lambda update, topic: got.append(update),
-                               heartbeats=False)
-    return client, got
-
-
-def _cell_at(x, y, resolution=0.05, origin=(-10.0, -20.0), size_x=2000):
-    return int((y - origin[1]) / resolution) * size_x + int((x - origin[0]) / resolution)
-
-
 @pytest.mark.parametrize("radius,kept", [(5.0 * math.sqrt(0.5), True), (5.0 * math.sqrt(0.5) + 1e-9, False)])
 def test_evidence_radius_may_equal_the_max_footprint_extent_squares_and_not_exceed_it(receiver, make_update,
                                                                                        radius, kept):
@@ -100,7 +76,7 @@ def test_evidence_radius_may_equal_the_max_footprint_extent_squares_and_not_exce
     such a footprint would vouch for cells farther away than any accepted advert could, so it is refused too.
     Exactly the square's circumradius is a footprint an advert may have."""
     client, got = receiver
-    update = make_update(stamp=STAMP, rectangle=(0.95, 2.95, 1.05, 3.05), marked=(_cell_at(1.0, 3.0),), cleared=())
+    update = make_update(stamp=STAMP, rectangle=(0.95, 2.95, 1.05, 3.05), marked=(cell_at(1.0, 3.0),), cleared=())
     obj = codec.obstacle_to_object(update)
     obj["evidence"] = [STAMP, 1.0, 3.0, radius, REACH]
     client.handle(str(Topic("fleet", "ADV", str(uuidlib.uuid4()), object_type=OT)), codec.advertise_payload(obj))
@@ -110,23 +86,6 @@ def test_evidence_radius_may_equal_the_max_footprint_extent_squares_and_not_exce
 
 # ------------------------------------------------------------------ evidence.py: what this robot sends
 
-@pytest.fixture
-def bridge():
-    clock = Clock()
-    client = CoatyBridgeClient(BridgeConfig("robot_0", evidence_window=WINDOW, sensor_reach=3.0),
-                               lambda update, topic: None, clock=clock, heartbeats=False)
-    sent = []
-    client._send = lambda topic, payload, **_: sent.append((topic, json.loads(payload)["object"]))
-    client._connected = True
-    client.expect_footprints(True)
-    return client, clock, sent
-
-
-def _footprint(stamp, x=1.0):
-    return footprints.RobotFootprint(robot="robot_0", stamp=stamp, frame_id="map",
-                                     points=((x, 2.0), (x + 0.5, 2.0), (x + 0.5, 2.5), (x, 2.5)))
-
-
 @pytest.mark.parametrize("offset,evidence", [
     (-WINDOW, True), (-(WINDOW + STEP), False), (-(WINDOW - STEP), True), (WINDOW, True)])
 def test_a_footprint_within_the_window_before_or_after_the_stamp_is_evidence(bridge, make_update, offset, evidence):
@@ -134,7 +93,7 @@ def test_a_footprint_within_the_window_before_or_after_the_stamp_is_evidence(bri
     after the stamp (the window itself included), no farther, or the pose says little about what it saw.
     (The after side just inside/outside is in test_evidence_out.py.)"""
     client, clock, sent = bridge
-    client.note_own_footprint(_footprint(100.0 + offset))
+    client.note_own_footprint(footprint(100.0 + offset))
     update = make_update(stamp=100.0)
     client.publish_obstacle(update)
     if evidence:
