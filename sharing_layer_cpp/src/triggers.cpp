@@ -36,6 +36,24 @@ double squaredDistance(double ax, double ay, double bx, double by)
   return (ax - bx) * (ax - bx) + (ay - by) * (ay - by);
 }
 
+/// @return the index of the pose of `plan` nearest (x, y) and its squared distance; (0, infinity) when no pose is
+/// finite (a pose that is not gives no finite distance, so it is never the nearest)
+std::pair<std::size_t, double> nearestPose(const std::vector<std::pair<double, double>>& plan, double x, double y)
+{
+  std::size_t nearest = 0;
+  double best = kInf;
+  for (std::size_t i = 0; i < plan.size(); ++i)
+  {
+    const double d = squaredDistance(plan[i].first, plan[i].second, x, y);
+    if (d < best)
+    {
+      best = d;
+      nearest = i;
+    }
+  }
+  return {nearest, best};
+}
+
 /// @return the centre of a cell, in the grid's frame
 void cellCentre(const GridGeometry& g, std::uint32_t index, double& wx, double& wy)
 {
@@ -341,15 +359,7 @@ void Triggers::explainNothing(TriggerReport& report, double robot_x, double robo
 
 double nearestPlanDistance(const std::vector<std::pair<double, double>>& plan, double robot_x, double robot_y)
 {
-  double best = kInf;
-  for (const auto& pose : plan)
-  {
-    if (std::isfinite(pose.first) && std::isfinite(pose.second))
-    {
-      best = std::min(best, std::hypot(pose.first - robot_x, pose.second - robot_y));
-    }
-  }
-  return best;
+  return std::sqrt(nearestPose(plan, robot_x, robot_y).second);
 }
 
 bool Triggers::setPlan(const std::vector<std::pair<double, double>>& poses)
@@ -368,17 +378,7 @@ bool Triggers::setPlan(const std::vector<std::pair<double, double>>& poses)
 
 std::vector<std::size_t> Triggers::planAhead(double robot_x, double robot_y, double reach) const
 {
-  std::size_t nearest = 0;
-  double best = kInf;
-  for (std::size_t i = 0; i < plan_.size(); ++i)
-  {
-    const double d = squaredDistance(plan_[i].first, plan_[i].second, robot_x, robot_y);
-    if (d < best)
-    {
-      best = d;
-      nearest = i;
-    }
-  }
+  const std::size_t nearest = nearestPose(plan_, robot_x, robot_y).first;
   std::vector<std::size_t> ahead;
   const double reach_sq = reach * reach;
   for (std::size_t i = nearest; i < plan_.size(); ++i)
