@@ -55,9 +55,11 @@ BENCHMARKS = {
                   "shared obstacle lifecycle: followers sent 10 s .. 15 min after a block was found, and after it "
                   "was removed (two-corridor world, sharing on vs off)"),
     "fleet": ([sys.executable, os.path.join(ROOT, "tests", "scripts", "bench_fleet"), "--layout", "all",
+               "--logs", os.path.join(OUT, "fleet_runs"),
                "--table", os.path.join(OUT, "fleet.md"), "--chart", os.path.join(OUT, "fleet.png")],
               "fleet benefit on upstream move_base and Stage: N = 2, 5, 10 robots in the facility, dead-end and "
-              "two-corridor worlds, sharing on vs off, 3 seeds (tables and charts out/bench/fleet_<world>.md/png)"),
+              "two-corridor worlds, sharing on vs off, 3 seeds (tables and charts out/bench/fleet_<world>.md/png; "
+              "runs kept in out/bench/fleet_runs: run again, only the missing ones run)"),
 }
 
 

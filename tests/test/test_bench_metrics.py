@@ -267,8 +267,12 @@ def test_on_stage_the_non_defaults_are_the_tutorials_multi_robot_rate_and_what_t
                                                           "--obstacle-duration", "600"]))
     assert lines[0].startswith("move_base controller_frequency: 10")
     assert any(line.startswith("obstacle_duration: 600 s") for line in lines)
-    assert any(line.startswith("Stage speedup 2") for line in lines)
-    assert not any("speedup" in line for line in bf.non_defaults(bf.make_parser().parse_args(["--host", "stage"])))
+    assert any(line.startswith("Stage speedup 2 (N = 2, 5, 10)") for line in lines)
+    real_time = bf.make_parser().parse_args(["--host", "stage", "--robots", "2", "5"])
+    assert not any("speedup" in line for line in bf.non_defaults(real_time))
+    by_default = bf.non_defaults(bf.make_parser().parse_args(["--host", "stage"]))
+    assert "Stage speedup 1 (N = 2, 5), 0.5 (N = 10) (real time: 1; the factor each run reached is in the table)" \
+        in by_default
 
 
 def test_the_on_off_interval_is_students_t_over_the_seeds_and_none_for_one_seed():
