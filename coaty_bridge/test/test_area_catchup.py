@@ -250,6 +250,34 @@ def test_the_areas_a_robot_observes_are_subscribed_again_on_every_connect(make_u
     assert set(expected) <= set(fake.subscribed), fake.subscribed
 
 
+def test_an_update_published_while_its_expired_area_is_being_left_keeps_the_area_observed(make_update):
+    """The incoming thread reads the area's live own updates (none: they expired), then the publishing thread sends
+    a new one there, then the incoming thread stops observing the area. The new update's area must stay observed,
+    or a robot entering it later would not be answered. The interleaving is forced, not waited for."""
+    now = [1000.0]
+    client = CoatyBridgeClient(BridgeConfig("robot_0", obstacle_area_size=AREA_M), lambda u, t: None,
+                               clock=lambda: now[0])                                     # never started
+    client.note_own_position((5.0, 5.0))
+    client.publish_obstacle(make_update(version=1, deadline=20))                        # area (0, 0)
+    now[0] = 1030.0                                                                      # expired
+    read_alive = client._replayable_own_updates_sent
+    fresh = make_update(version=1, deadline=600)
+
+    def read_then_publish():
+        alive = read_alive()
+        if not client._obstacle_area_published:
+            client._obstacle_area_published = client.publish_obstacle(fresh)           # same area, after the read
+        return alive
+    client._obstacle_area_published = False
+    client._replayable_own_updates_sent = read_then_publish
+    asker = str(uuidlib.uuid4())
+    topic = Topic("fleet", "CHN", asker, filter=catchup.channel((0, 0)))
+    client._answer_catchup(topic, json.loads(catchup.request_payload(str(uuidlib.uuid4()))))
+    assert client._obstacle_area_published
+    assert client.counters().get("catchup_areas_left") == 1
+    assert client._catchup_topics() == ["coaty/+/fleet/CHN:%s/+" % catchup.channel((0, 0))]
+
+
 def test_without_obstacle_areas_nothing_is_observed(make_update):
     client = CoatyBridgeClient(BridgeConfig("robot_0", obstacle_area_size=0), lambda u, t: None)
     client.publish_obstacle(make_update(version=1))

@@ -166,6 +166,12 @@ class CatchUpMixin:
                 if self._connected:
                     self._mqtt.unsubscribe(self._catchup_subscription(area))
             self._count("catchup_areas_left")
+            # An own update published there since `alive` was read found the area still observed and did not
+            # subscribe; it is logged before that check, so looking again now sees it and observes the area again.
+            for update, _sent_at in self._replayable_own_updates_sent():
+                if self._obstacle_area(update) == area:
+                    self._observe_catchup_area(update)
+                    break
             return
         if not answers:
             self._count("catchups_nothing_new")   # the requester heard all of it before it left
