@@ -323,3 +323,27 @@ def test_a_pair_that_never_arrived_makes_the_p99_infinite_not_smaller():
     assert percentile([1.0] * 99 + [math.inf], 50) == 1.0
     assert math.isinf(percentile([1.0] * 98 + [math.inf] * 2, 99))
     assert math.isinf(percentile([math.inf], 99))
+
+
+def full_row(times, reached, recoveries=0, crossed=0, precision=1.0, factor=1.0):
+    return {"time_to_goal": dict(("robot_%d" % i, t) for i, t in enumerate(times)),
+            "time_mean": sum(times) / len(times) if times else float("nan"), "reached": reached,
+            "recoveries": recoveries, "entered_blocked_corridor": crossed, "realtime_factor": factor,
+            "ground_truth": {"precision": precision, "recall": {"block": 0.9}}}
+
+
+def test_the_overview_has_one_row_per_world_and_n_pooled_over_complete_seeds():
+    bf = load_bench_fleet()
+    deadend = [(2, True, 1, full_row([40.0], 1, 4, 1)), (2, False, 1, full_row([], 0, 8, 2)),
+               (10, True, 1, full_row([30.0, 34.0], 2, 0, 1, factor=0.5)), (10, False, 1, full_row([60.0], 1, 4, 2)),
+               (10, True, 2, full_row([32.0], 1, factor=0.49)), (10, False, 2, full_row([64.0], 1)),
+               (10, True, 3, full_row([1.0], 1)), (10, False, 3, None)]            # seed 3 incomplete: left out
+    corridors = [(5, True, 1, None), (5, False, 1, full_row([50.0], 1))]
+    lines = bf.overview({"deadend": deadend, "corridors": corridors})
+    assert lines[2] == ("| deadend | 2 | 1 | 1.00 | 1/2 / 0/2 | 40.0 ± 0.0 / - | - | - (no robot arrived without sharing) "
+                        "| 4 / 8 | 1 / 2 | 1.000 | 0.900 |")
+    mean_on, mean_off = 32.0, 62.0
+    assert lines[3].startswith("| deadend | 10 | 1 2 | 0.49 | 3/20 / 2/20 | %.1f ± 2.0 / %.1f ± 2.8 | %.2f | "
+                               % (mean_on, mean_off, mean_on / mean_off)), lines[3]
+    assert "| 0 / 4 | 1 / 2 |" in lines[3]                  # the sums over both seeds
+    assert lines[4] == "| corridors | 5 | none complete | | | | | | | | | |"

@@ -129,6 +129,8 @@ def test_layout_selects_world_map_and_goals(layout, robots, goals):
     (["--obstacle-duration", "0"], "--obstacle-duration must be at least 1 s"),
     (["--time-limit", "-1"], "--time-limit at least 0"),
     (["--speedup", "0"], "'0': the factor must be a number above 0"),
+    (["--table", "/nonexistent/fleet.md"], "--table /nonexistent/fleet.md: its folder does not exist"),
+    (["--chart", "/nonexistent/fleet.png"], "--chart /nonexistent/fleet.png: its folder does not exist"),
     (["--speedup", "10:x"], "'10:x' is not a speedup"),
     (["--speedup", "10:0.5", "10:1"], "--speedup names an N (or the bare FACTOR) twice"),
     (["--nav-params", "/nonexistent/nav.yaml"], "--nav-params: /nonexistent/nav.yaml is not a file"),

@@ -31,6 +31,49 @@ def ratio_interval(ratios, confidence=0.95):
     return m, m - half, m + half
 
 
+def pooled(rows, n):
+    """The figures of N robots over the seeds that have both runs, or None when no seed has: time to goal of every
+    robot that reached its goal (``on``, ``off``), their ``ratio``, the per-seed ratio's mean and 95 % interval
+    (``per_seed_ratio``), the counts summed over the seeds (``reached``, ``recoveries``, ``crossed``: {sharing:
+    total}) and listed per seed (``per_seed(key, sharing)``), the slowest simulator factor, and the ground truth's
+    minimum precision and face recall (None when no run measured them)."""
+    got = {(s, sh): r for nn, sh, s, r in rows if nn == n and r is not None}
+    seeds = sorted({s for s, _sh in got if (s, True) in got and (s, False) in got})
+    if not seeds:
+        return None
+    on = [t for s in seeds for t in got[(s, True)]["time_to_goal"].values()]
+    off = [t for s in seeds for t in got[(s, False)]["time_to_goal"].values()]
+    (m_on, _), (m_off, _) = mean_sd(on), mean_sd(off)
+    truth = [got[(s, True)].get("ground_truth") or {} for s in seeds]
+    precisions = [t["precision"] for t in truth if isinstance(t.get("precision"), float) and math.isfinite(t["precision"])]
+    recalls = [v for t in truth for v in (t.get("recall") or {}).values()]
+    factors = [got[(s, sh)].get("realtime_factor") for s in seeds for sh in (True, False)]
+    factors = [f for f in factors if isinstance(f, (int, float)) and math.isfinite(f)]
+
+    def total(key, sharing):
+        return sum(got[(s, sharing)].get(key, 0) for s in seeds)
+    return {
+        "n": n, "seeds": seeds, "got": got, "on": on, "off": off,
+        "ratio": m_on / m_off if m_off and math.isfinite(m_on) and math.isfinite(m_off) else float("nan"),
+        "per_seed_ratio": ratio_interval([got[(s, True)]["time_mean"] / got[(s, False)]["time_mean"] for s in seeds
+                                          if got[(s, False)]["time_mean"]]),
+        "factor": min(factors) if factors else None,
+        "reached": {sh: total("reached", sh) for sh in (True, False)},
+        "recoveries": {sh: total("recoveries", sh) for sh in (True, False)},
+        "crossed": {sh: total("entered_blocked_corridor", sh) for sh in (True, False)},
+        "precision": min(precisions) if precisions else None,
+        "recall": min(recalls) if recalls else None,
+        "per_seed": lambda key, sharing: "+".join(str(got[(s, sharing)].get(key, "?")) for s in seeds),
+    }
+
+
+def interval_text(per_seed_ratio):
+    mean, low, high = per_seed_ratio
+    if math.isfinite(low):
+        return "%.2f [%.2f, %.2f]" % per_seed_ratio
+    return "%.2f (one seed: no interval)" % mean if math.isfinite(mean) else "-"
+
+
 def summary(rows):
     """Per N: time to goal (every robot of every seed that reached its goal) with sharing against
     without; the saving per seed (mean off - mean on) shows the spread between seeds; the other
@@ -45,33 +88,18 @@ def summary(rows):
              "| precision of shared cells against ground truth, min over seeds | face recall, min over seeds and blocks |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for n in sorted({r[0] for r in rows}):
-        got = {(s, sh): r for nn, sh, s, r in rows if nn == n and r is not None}
-        seeds = sorted({s for s, _sh in got if (s, True) in got and (s, False) in got})
-        if not seeds:
+        p = pooled(rows, n)
+        if p is None:
             lines.append("| %d | none complete | | | | | | | | | | | | | | | |" % n)
             continue
-        on = [t for s in seeds for t in got[(s, True)]["time_to_goal"].values()]
-        off = [t for s in seeds for t in got[(s, False)]["time_to_goal"].values()]
-        (m_on, _sd_on), (m_off, _sd_off) = mean_sd(on), mean_sd(off)
+        got, seeds, per_seed = p["got"], p["seeds"], p["per_seed"]
         p95 = [mean_sd([got[(s, sh)]["time_p95"] for s in seeds])[0] for sh in (True, False)]
         saved = ", ".join("%.1f" % (got[(s, False)]["time_mean"] - got[(s, True)]["time_mean"]) for s in seeds)
-        reached = ["%d/%d" % (sum(got[(s, sh)]["reached"] for s in seeds), n * len(seeds)) for sh in (True, False)]
-
-        def per_seed(key, sharing):
-            return "+".join(str(got[(s, sharing)].get(key, "?")) for s in seeds)
-        ratio = m_on / m_off if m_off and math.isfinite(m_on) and math.isfinite(m_off) else float("nan")
-        truth = [got[(s, True)].get("ground_truth") or {} for s in seeds]
-        precisions = [t["precision"] for t in truth if isinstance(t.get("precision"), float) and math.isfinite(t["precision"])]
-        recalls = [v for t in truth for v in (t.get("recall") or {}).values()]
-        per_seed_ratio = ratio_interval([got[(s, True)]["time_mean"] / got[(s, False)]["time_mean"] for s in seeds
-                                         if got[(s, False)]["time_mean"]])
-        factors = [got[(s, sh)].get("realtime_factor") for s in seeds for sh in (True, False)]
-        factors = [f for f in factors if isinstance(f, (int, float)) and math.isfinite(f)]
+        reached = ["%d/%d" % (p["reached"][sh], n * len(seeds)) for sh in (True, False)]
         lines.append("| %d | %s | %s | %s | %.2f | %s | %s | %.1f / %.1f | %s | %s / %s | %s / %s | %s / %s | %s / %s | %s | %s | %s | %s |" % (
-            n, " ".join(map(str, seeds)), fmt_mean_sd(on), fmt_mean_sd(off), ratio,
-            "%.2f [%.2f, %.2f]" % per_seed_ratio if math.isfinite(per_seed_ratio[1]) else
-            ("%.2f (one seed: no interval)" % per_seed_ratio[0] if math.isfinite(per_seed_ratio[0]) else "-"),
-            "%.2f" % min(factors) if factors else "-", p95[0], p95[1], saved,
+            n, " ".join(map(str, seeds)), fmt_mean_sd(p["on"]), fmt_mean_sd(p["off"]), p["ratio"],
+            interval_text(p["per_seed_ratio"]),
+            "%.2f" % p["factor"] if p["factor"] is not None else "-", p95[0], p95[1], saved,
             per_seed("recoveries", True), per_seed("recoveries", False),
             per_seed("stuck", True), per_seed("stuck", False),
             per_seed("entered_blocked_corridor", True), per_seed("entered_blocked_corridor", False),
@@ -79,7 +107,37 @@ def summary(rows):
             fmt_mean_sd([got[(s, True)].get("broker_bytes_per_robot_per_min", float("nan")) for s in seeds], 0),
             ", ".join("%s (%s, %s)" % (got[(s, True)].get("obstacles", "?"), got[(s, True)].get("obstacles_robots", "?"),
                                        got[(s, True)].get("obstacles_walls", "?")) for s in seeds),
-            "%.3f" % min(precisions) if precisions else "-", "%.3f" % min(recalls) if recalls else "-"))
+            "%.3f" % p["precision"] if p["precision"] is not None else "-",
+            "%.3f" % p["recall"] if p["recall"] is not None else "-"))
+    return lines
+
+
+def overview(by_layout):
+    """One row per world and N ({layout: rows}, in the order given): what the per-world summaries say, side by side.
+    A ratio that cannot be formed says why."""
+    lines = ["| world | N | seeds | simulated s per wall s (min) | reached on / off | time to goal on / off: mean ± sd s "
+             "| on / off | on / off per seed: mean [95 % interval] | recovery events on / off "
+             "| robots that crossed a blocked corridor's mouth on / off | precision (min) | face recall (min) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for layout, rows in by_layout.items():
+        for n in sorted({r[0] for r in rows}):
+            p = pooled(rows, n)
+            if p is None:
+                lines.append("| %s | %d | none complete | | | | | | | | | |" % (layout, n))
+                continue
+            runs = n * len(p["seeds"])
+            if not p["off"]:
+                ratio, interval = "-", "- (no robot arrived without sharing)"
+            elif not p["on"]:
+                ratio, interval = "-", "- (no robot arrived with sharing)"
+            else:
+                ratio, interval = "%.2f" % p["ratio"], interval_text(p["per_seed_ratio"])
+            lines.append("| %s | %d | %s | %s | %d/%d / %d/%d | %s / %s | %s | %s | %d / %d | %d / %d | %s | %s |" % (
+                layout, n, " ".join(map(str, p["seeds"])), "%.2f" % p["factor"] if p["factor"] is not None else "-",
+                p["reached"][True], runs, p["reached"][False], runs, fmt_mean_sd(p["on"]), fmt_mean_sd(p["off"]),
+                ratio, interval, p["recoveries"][True], p["recoveries"][False], p["crossed"][True],
+                p["crossed"][False], "%.3f" % p["precision"] if p["precision"] is not None else "-",
+                "%.3f" % p["recall"] if p["recall"] is not None else "-"))
     return lines
 
 
