@@ -27,8 +27,9 @@ from coaty_bridge import codec
 from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic
 
-from test_attacks_nodes import (ATTACKER, ATTACKER_POSE, DURATION, NS, OT, OX, OY, RES, ROBOTS, SX, SY, GOOD, cell, evil,
-                                fleet, wait_until)  # noqa: F401 (fleet: the module's running fleet, a fixture)
+from attack_fleet import (ATTACKER, ATTACKER_POSE, DURATION, NS, OT, OX, OY, RES, ROBOTS, SX, SY, GOOD, cell, evil,
+                          wait_until)
+from test_attacks_nodes import fleet  # noqa: F401 (the module's running fleet, a fixture)
 from test_secure_default import Peer
 
 pytestmark = [pytest.mark.ros, pytest.mark.broker]
