@@ -21,7 +21,8 @@ import sys
 import time
 
 from fleet_tests.ground_truth import run_figures
-from fleet_tests.scenario import percentile, sys_message_bytes  # noqa: F401 (metrics, tests)
+from fleet_tests.broker_counters import sys_message_bytes  # noqa: F401 (metrics, tests)
+from fleet_tests.scenario import percentile  # noqa: F401 (metrics, tests)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -254,8 +255,8 @@ def robot_radius_param():
 
 def main(argv=None):
     import rospy
-    from fleet_tests.scenario import (BrokerCounters, Fleet, ScenarioError, cell_centre, fleet_sharing, load_facility,
-                                      wait_for_sim_time)
+    from fleet_tests.broker_counters import BrokerCounters
+    from fleet_tests.scenario import Fleet, ScenarioError, cell_centre, fleet_sharing, load_facility, wait_for_sim_time
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", type=int, required=True)
