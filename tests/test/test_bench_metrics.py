@@ -347,3 +347,17 @@ def test_the_overview_has_one_row_per_world_and_n_pooled_over_complete_seeds():
                                % (mean_on, mean_off, mean_on / mean_off)), lines[3]
     assert "| 0 / 4 | 1 / 2 |" in lines[3]                  # the sums over both seeds
     assert lines[4] == "| corridors | 5 | none complete | | | | | | | | | |"
+
+
+def test_a_chart_says_where_no_robot_arrived_instead_of_leaving_the_bar_out_silently(tmp_path):
+    bf = load_bench_fleet()
+    rows = [(2, True, 1, full_row([50.0], 1)), (2, False, 1, full_row([], 0)),
+            (10, True, 1, full_row([30.0], 1, factor=0.5)), (10, False, 1, full_row([60.0], 1, factor=0.5))]
+    path = str(tmp_path / "c.png")
+    drawn = bf.chart(rows, path, "test")
+    assert set(drawn) == {(2, True), (10, True), (10, False)}
+    from PIL import Image
+    img = Image.open(path).convert("RGB")
+    x0, _top, x1, bottom = drawn[(2, True)]
+    slot = img.crop((int(x1) + 14, int(bottom) - 32, int(x1) + 70, int(bottom) - 2))   # where the off bar would be
+    assert any(p == (0, 0, 0) for p in slot.getdata()), "no text where the sharing-off bar is missing"

@@ -159,12 +159,12 @@ def chart(rows, path, title):
             bars[sharing] = (mean_sd(times), [got[(s, sharing)]["time_mean"] for s in seeds])
             reached[sharing] = (sum(got[(s, sharing)].get("reached", len(got[(s, sharing)]["time_to_goal"]))
                                     for s in seeds), n * len(seeds))
-        groups.append((n, seeds, bars, reached))
+        groups.append((n, seeds, bars, reached, pooled(rows, n)["factor"]))
     if not groups:
         raise ValueError("chart: no N with a seed that has both a sharing-on and a sharing-off result")
-    top_value = max(m + sd for _n, _s, bars, _r in groups for (m, sd), per_seed in bars.values()
+    top_value = max(m + sd for _n, _s, bars, _r, _f in groups for (m, sd), per_seed in bars.values()
                     for m, sd in [(m, sd if math.isfinite(sd) else 0.0)] if math.isfinite(m))
-    top_value = max(top_value, max(v for _n, _s, bars, _r in groups for _m, per_seed in bars.values()
+    top_value = max(top_value, max(v for _n, _s, bars, _r, _f in groups for _m, per_seed in bars.values()
                                    for v in per_seed if math.isfinite(v)))
     # wide enough for the subtitle whatever the number of groups
     width, height, left, bottom, top = max(660, 140 + 190 * len(groups)), 450, 70, 360, 60
@@ -181,13 +181,18 @@ def chart(rows, path, title):
         d.text((left - 30, y - 6), "%d" % v, fill="black")
     colours = {True: (40, 120, 200), False: (200, 110, 40)}
     drawn = {}
-    for k, (n, seeds, bars, reached) in enumerate(groups):
+    for k, (n, seeds, bars, reached, factor) in enumerate(groups):
         x = left + 30 + k * 190
         for j, sharing in enumerate((True, False)):
             (m, sd), per_seed = bars[sharing]
-            if not math.isfinite(m):
-                continue
             x0, x1 = x + j * 70, x + j * 70 + 56
+            if not math.isfinite(m):
+                # no bar: say so where it would stand
+                d.text((x0 + 2, bottom - 30), "none", fill="black")
+                d.text((x0 + 2, bottom - 16), "arrived", fill="black")
+                d.text((x0 + 8, bottom + 6), "on" if sharing else "off", fill="black")
+                d.text((x0, bottom + 40), "%d/%d" % reached[sharing], fill="black")
+                continue
             y = bottom - m * scale
             d.rectangle((x0, y, x1, bottom), fill=colours[sharing])
             drawn[(n, sharing)] = (x0, y, x1, bottom)
@@ -201,8 +206,10 @@ def chart(rows, path, title):
             d.text((x0, bottom + 40), "%d/%d" % reached[sharing], fill="black")
         (m_on, _), _ = bars[True]
         (m_off, _), _ = bars[False]
-        ratio = "on/off %.2f" % (m_on / m_off) if m_off and math.isfinite(m_on) and math.isfinite(m_off) else ""
-        d.text((x, bottom + 24), "N = %d (seeds %s)" % (n, " ".join(map(str, seeds))), fill="black")
+        ratio = "on/off %.2f" % (m_on / m_off) if m_off and math.isfinite(m_on) and math.isfinite(m_off) else \
+            "on/off -"   # the bar slot that has none says why
+        speed = "" if factor is None or factor >= 0.995 else ", Stage x%.2f" % factor
+        d.text((x, bottom + 24), "N = %d (seeds %s)%s" % (n, " ".join(map(str, seeds)), speed), fill="black")
         d.text((x, bottom + 56), "robots that reached their goal", fill=(90, 90, 90))
         d.text((x, top - 16), ratio, fill="black")
     img.save(path)
