@@ -16,6 +16,7 @@
 #include <tf2_ros/buffer.h>
 
 #include "../sharing_layer.h"
+#include "plugin_fixture.h"
 
 namespace
 {
@@ -108,24 +109,7 @@ TEST(PluginLocalisation, NothingIsSentWhileOdometryAndLocalisationDisagree)
   ros::Subscriber updates = nh.subscribe<sharing_msgs::SharedObstacle>(
       "obstacle_updates", 100, [&](const sharing_msgs::SharedObstacle::ConstPtr& msg) { sent.push_back(*msg); });
   ros::Publisher shared = nh.advertise<sharing_msgs::SharedObstacle>("shared_obstacles", 1, true);
-  sharing_msgs::SharedObstacle block;
-  block.header.frame_id = "map";
-  block.header.stamp = ros::Time::now();
-  block.uuid = "block-3m";
-  block.resolution = 0.05f;
-  block.size_x = block.size_y = 200;
-  for (unsigned int y = 60; y <= 62; ++y)
-  {
-    for (unsigned int x = 60; x <= 62; ++x)
-    {
-      block.marked_indexes.push_back(y * 200 + x);
-    }
-  }
-  block.deadline = 600;
-  block.rectangle_shape = { 2.9f, 2.9f, 3.3f, 3.3f };
-  block.source = "robot_1";
-  block.version = 1;
-  shared.publish(block);
+  shared.publish(sharing_layer_test::blockAt3m());
 
   ros::Time stamp = ros::Time::now();
   double odom_yaw = 0.0;

@@ -99,12 +99,9 @@ inline sensor_msgs::PointCloud2 ring(int beams, double phase)
   return cloud;
 }
 
-/// Sends a 3 x 3-cell shared obstacle around world (3.05, 3.05) to the layer, as its handler would, and waits
-/// until the layer has drawn it into the master (the outcome), at most 30 s.
-inline bool shareBlockAt3m(costmap_2d::LayeredCostmap& costmap, double robot_x, double robot_y)
+/// A 3 x 3-cell shared obstacle of robot_1 around world (3.05, 3.05) on a 10 m map at 0.05 m, as a handler sends it.
+inline sharing_msgs::SharedObstacle blockAt3m()
 {
-  ros::NodeHandle nh;
-  ros::Publisher pub = nh.advertise<sharing_msgs::SharedObstacle>("shared_obstacles", 1, true);
   sharing_msgs::SharedObstacle msg;
   msg.header.frame_id = "map";
   msg.header.stamp = ros::Time::now();
@@ -125,6 +122,16 @@ inline bool shareBlockAt3m(costmap_2d::LayeredCostmap& costmap, double robot_x, 
   msg.rectangle_shape = { 2.9f, 2.9f, 3.3f, 3.3f };
   msg.source = "robot_1";
   msg.version = 1;
+  return msg;
+}
+
+/// Sends a 3 x 3-cell shared obstacle around world (3.05, 3.05) to the layer, as its handler would, and waits
+/// until the layer has drawn it into the master (the outcome), at most 30 s.
+inline bool shareBlockAt3m(costmap_2d::LayeredCostmap& costmap, double robot_x, double robot_y)
+{
+  ros::NodeHandle nh;
+  ros::Publisher pub = nh.advertise<sharing_msgs::SharedObstacle>("shared_obstacles", 1, true);
+  const sharing_msgs::SharedObstacle msg = blockAt3m();
   pub.publish(msg);
   const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(30.0);
   while (ros::WallTime::now() < end)
