@@ -149,17 +149,16 @@ def chart(rows, path, title):
     from PIL import Image, ImageDraw
     groups = []
     for n in sorted({r[0] for r in rows}):
-        got = {(s, sh): r for nn, sh, s, r in rows if nn == n and r is not None}
-        seeds = sorted({s for s, _sh in got if (s, True) in got and (s, False) in got})
-        if not seeds:
+        p = pooled(rows, n)
+        if p is None:
             continue
+        got, seeds = p["got"], p["seeds"]
         bars, reached = {}, {}
-        for sharing in (True, False):
-            times = [t for s in seeds for t in got[(s, sharing)]["time_to_goal"].values()]
+        for sharing, times in ((True, p["on"]), (False, p["off"])):
             bars[sharing] = (mean_sd(times), [got[(s, sharing)]["time_mean"] for s in seeds])
             reached[sharing] = (sum(got[(s, sharing)].get("reached", len(got[(s, sharing)]["time_to_goal"]))
                                     for s in seeds), n * len(seeds))
-        groups.append((n, seeds, bars, reached, pooled(rows, n)["factor"]))
+        groups.append((n, seeds, bars, reached, p["factor"]))
     if not groups:
         raise ValueError("chart: no N with a seed that has both a sharing-on and a sharing-off result")
     top_value = max(m + sd for _n, _s, bars, _r, _f in groups for (m, sd), per_seed in bars.values()
