@@ -16,7 +16,7 @@ from coaty_bridge.identity import identity_for
 from coaty_bridge.topics import Topic
 
 import polling
-from test_secure_default import Lines, Peer, launch_bridge_params, start_secure_broker
+from test_secure_default import Lines, Peer, close_peers, launch_bridge_params, start_secure_broker
 
 NS = "fleet"
 OT = codec.DEFAULT_OBJECT_TYPE
@@ -300,9 +300,5 @@ class NodeFleet:
                      json.dumps({"object": obj}).encode())
 
     def close(self):
-        for peer in self.peers:
-            try:
-                peer.close()
-            except Exception:
-                pass
+        close_peers(self.peers)
         print("fresh-obstacle latencies (s): " + ", ".join("%s %.3f" % (w, l) for w, l in LATENCIES))

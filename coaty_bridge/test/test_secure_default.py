@@ -85,6 +85,15 @@ class Peer:
         self.client.loop_stop()
 
 
+def close_peers(peers):
+    """Closes every peer a test opened; one that is already gone does not stop the others being closed."""
+    for peer in peers:
+        try:
+            peer.close()
+        except Exception:
+            pass
+
+
 def obstacle(source, **fields):
     """test_bridge_auth's obstacle, stamped 100.5."""
     return auth_obstacle(source, **dict({"stamp": 100.5}, **fields))
@@ -224,11 +233,7 @@ class SecureFleet:
         self.probe.events[:] = [e for e in self.probe.events if e.get("event") != "sent"]
 
     def close(self):
-        for peer in self.peers:
-            try:
-                peer.close()
-            except Exception:
-                pass
+        close_peers(self.peers)
 
 
 @pytest.fixture
