@@ -71,6 +71,7 @@ void readLayerConfig(const ros::NodeHandle& nh, double footprint_inscribed, cons
   // Fleet robots are never shared.
   nh.param("robot_exclusion_margin", c.fleet.margin, 0.2);
   nh.param("robot_timeout", c.fleet.timeout, 3.0);
+  nh.param("robot_exclusion_trail", c.fleet.trail, 1.0);
   nh.param("fleet_robots_topic", c.fleet_robots_topic, std::string("fleet_robots"));
   // Odometry against localisation: how much they may disagree before nothing is shared.
   nh.param("max_correction_speed", c.localisation.max_speed, 0.25);

@@ -16,7 +16,7 @@ namespace sharing_layer
 struct LayerConfig
 {
   LayerParams params;                ///< the core's parameters (ranges, triggers, evidence, leases)
-  FleetRobotParams fleet;            ///< robot_exclusion_margin, robot_timeout
+  FleetRobotParams fleet;            ///< robot_exclusion_margin, robot_timeout, robot_exclusion_trail
   LocalisationLimits localisation;   ///< max_correction_speed, max_correction_turn, correction_window
   bool inscribed_from_footprint = true;  ///< ~inscribed_radius not set: follow the footprint
   std::string plan_topics;           ///< space-separated; "none" or empty switches the plan trigger off

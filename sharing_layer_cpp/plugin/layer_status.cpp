@@ -47,6 +47,7 @@ void SharingLayer::startDiagnosticsAndReconfigure(const ros::NodeHandle& private
     initial.clearing_neighbours = static_cast<int>(std::min(params_.clearing_neighbours, 1000000u));
     initial.robot_exclusion_margin = fleet_params_.margin;
     initial.robot_timeout = fleet_params_.timeout;
+    initial.robot_exclusion_trail = fleet_params_.trail;
     initial.lease_renewal_interval = params_.lease_renewal_interval;
   }
   boost::recursive_mutex::scoped_lock lock(reconfigure_mutex_);
@@ -86,6 +87,7 @@ void SharingLayer::reconfigure(sharing_layer_cpp::SharingLayerConfig& config, ui
   take(config.clearing_time, old.clearing_time, p.clearing_time, "clearing_time");
   take(config.robot_exclusion_margin, old.robot_exclusion_margin, next.fleet.margin, "robot_exclusion_margin");
   take(config.robot_timeout, old.robot_timeout, next.fleet.timeout, "robot_timeout");
+  take(config.robot_exclusion_trail, old.robot_exclusion_trail, next.fleet.trail, "robot_exclusion_trail");
   take(config.lease_renewal_interval, old.lease_renewal_interval, p.lease_renewal_interval,
        "lease_renewal_interval");
   // Negative counts stay out of range after the cast (validate() names them), as readLayerConfig does.

@@ -72,7 +72,7 @@ public:
   bool sharesGridWithCore();
   /// @brief The sharing parameters in use: the core's (its last cycle's), or the layer's before the core exists.
   LayerParams sharingParams();
-  /// @brief robot_exclusion_margin and robot_timeout in use.
+  /// @brief robot_exclusion_margin, robot_timeout and robot_exclusion_trail in use.
   FleetRobotParams fleetRobotParams();
   /// @brief Whether the layer left "waiting for the map" (/diagnostics' "map received": the static layer's map read
   /// from the master) and, when a map_topic is set, a map arrived on it.
@@ -150,7 +150,7 @@ private:
     BitGrid unknown;
   };
   std::unique_ptr<UnknownMap> map_;
-  FleetRobotParams fleet_params_;          ///< robot_exclusion_margin, robot_timeout
+  FleetRobotParams fleet_params_;          ///< robot_exclusion_margin, robot_timeout, robot_exclusion_trail
   sharing_msgs::RobotFootprintArray::ConstPtr fleet_robots_;  ///< last fleet_robots, re-applied to a new core
   bool static_pending_ = false;  ///< the static map is read from the master at the next full update
   /// Scans processed while static_pending_: their cells were judged shareable without the static map

@@ -80,10 +80,14 @@ void bindFleetRobots(py::module& m)
                           "get it from SharingCore.fleet_robots. Bad input raises ValueError and changes nothing.")
       .def_property_readonly("margin", [](const FleetRobots& r) { return r.params().margin; })
       .def_property_readonly("timeout", [](const FleetRobots& r) { return r.params().timeout; })
-      .def("set_params",
-           [](FleetRobots& r, double margin, double timeout) { r.setParams(FleetRobotParams{ margin, timeout }); },
-           py::arg("margin") = 0.2, py::arg("timeout") = 3.0,
-           "robot_exclusion_margin (m) and robot_timeout (s, 0 = never forget)")
+      .def_property_readonly("trail", [](const FleetRobots& r) { return r.params().trail; })
+      .def(
+          "set_params",
+          [](FleetRobots& r, double margin, double timeout, double trail) {
+            r.setParams(FleetRobotParams{ margin, timeout, trail });
+          },
+          py::arg("margin") = 0.2, py::arg("timeout") = 3.0, py::arg("trail") = 1.0,
+          "robot_exclusion_margin (m), robot_timeout (s, 0 = never forget) and robot_exclusion_trail (s, 0..10)")
       .def("update",
            [](FleetRobots& r, const std::string& name, const py::object& footprint, double stamp) {
              r.update(makeRobot(name, footprint, stamp));

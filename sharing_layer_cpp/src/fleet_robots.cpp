@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <stdexcept>
 
 namespace sharing_layer
@@ -17,6 +18,11 @@ void FleetRobotParams::validate() const
   {
     throw std::invalid_argument("robot_timeout must be finite and >= 0 s, got " + std::to_string(timeout));
   }
+  if (!std::isfinite(trail) || trail < 0.0 || trail > kMaxTrail)
+  {
+    throw std::invalid_argument("robot_exclusion_trail must be 0.." + std::to_string(kMaxTrail) + " s, got " +
+                                std::to_string(trail));
+  }
 }
 
 FleetRobots::FleetRobots(const GridGeometry& geometry, const FleetRobotParams& params)
@@ -29,12 +35,7 @@ void FleetRobots::setParams(const FleetRobotParams& params)
 {
   params.validate();
   params_ = params;
-  const std::map<std::string, FleetRobot> known = robots_;
-  clear();
-  for (const auto& entry : known)
-  {
-    update(entry.second);
-  }
+  rebuild();
 }
 
 void FleetRobots::check(const FleetRobot& robot)
@@ -139,15 +140,22 @@ void FleetRobots::update(const FleetRobot& robot)
 void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, std::pair<double, double> motion)
 {
   check(robot);
-  std::vector<std::uint32_t> cells = rasterize(geometry_, robot.footprint, params_.margin);
+  const std::vector<std::uint32_t> own = rasterize(geometry_, robot.footprint, params_.margin);
+  std::vector<std::uint32_t> cells = own;
+  bool jumped = false;
   // A driving robot is where its next advert will put it before that advert arrives: the footprint moved
   // on by as much as it moved since the previous advert is excluded too (the cells a moving robot's front
   // covers until the next refresh, else marked and shared as an obstacle). The same advert passed on again
   // (same stamp) keeps the motion; a new advert from a robot that stood still ends it.
-  if (previous != nullptr && !previous->footprint.empty() && previous->stamp != robot.stamp)
+  if (previous != nullptr && !previous->footprint.empty())
   {
     const auto now = centroid(robot.footprint), before = centroid(previous->footprint);
-    motion = { now.first - before.first, now.second - before.second };
+    const std::pair<double, double> step = { now.first - before.first, now.second - before.second };
+    jumped = std::hypot(step.first, step.second) > kMaxExtrapolatedMove;
+    if (previous->stamp != robot.stamp)
+    {
+      motion = step;
+    }
   }
   const double moved = std::hypot(motion.first, motion.second);
   if (!(moved > 0.5 * geometry_.resolution && moved <= kMaxExtrapolatedMove))
@@ -155,22 +163,38 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
     motion = { 0.0, 0.0 };
   }
   motion_[robot.name] = motion;
+  if (motion.first != 0.0 || motion.second != 0.0)
   {
-    const double dx = motion.first, dy = motion.second;
-    if (dx != 0.0 || dy != 0.0)
+    std::vector<std::pair<double, double>> ahead(robot.footprint);
+    for (auto& p : ahead)
     {
-      std::vector<std::pair<double, double>> ahead(robot.footprint);
-      for (auto& p : ahead)
-      {
-        p.first += dx;
-        p.second += dy;
-      }
-      std::vector<std::uint32_t> more = rasterize(geometry_, ahead, params_.margin);
-      cells.insert(cells.end(), more.begin(), more.end());
-      std::sort(cells.begin(), cells.end());
-      cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+      p.first += motion.first;
+      p.second += motion.second;
     }
+    const std::vector<std::uint32_t> more = rasterize(geometry_, ahead, params_.margin);
+    cells.insert(cells.end(), more.begin(), more.end());
   }
+  // Behind it, where it was while the scans the layer has yet to mark were taken. A footprint holds from its
+  // stamp until the next one's, so it is dropped once the next one is older than the trail.
+  std::deque<PastFootprint>& past = trail_[robot.name];
+  if (jumped || (!past.empty() && robot.stamp < past.back().stamp))
+  {
+    past.clear();
+  }
+  if (past.empty() || past.back().footprint != robot.footprint)
+  {
+    past.push_back(PastFootprint{ robot.stamp, robot.footprint, own });
+  }
+  while (past.size() >= 2 && (past[1].stamp <= robot.stamp - params_.trail || past.size() > kMaxTrailFootprints))
+  {
+    past.pop_front();
+  }
+  for (std::size_t i = 0; i + 1 < past.size(); ++i)
+  {
+    cells.insert(cells.end(), past[i].cells.begin(), past[i].cells.end());
+  }
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
   auto found = cells_.find(robot.name);
   if (found != cells_.end())
   {
@@ -189,7 +213,15 @@ void FleetRobots::replaceAll(const std::vector<FleetRobot>& robots)
   }
   const std::map<std::string, FleetRobot> previous = robots_;
   const std::map<std::string, std::pair<double, double>> motions = motion_;
-  clear();
+  clearCells();
+  robots_.clear();
+  motion_.clear();
+  for (auto it = trail_.begin(); it != trail_.end();)
+  {
+    const bool listed = std::any_of(robots.begin(), robots.end(),
+                                    [&](const FleetRobot& robot) { return robot.name == it->first; });
+    it = listed ? std::next(it) : trail_.erase(it);
+  }
   for (const FleetRobot& robot : robots)
   {
     const auto known = previous.find(robot.name);
@@ -210,16 +242,32 @@ bool FleetRobots::forget(const std::string& name)
   cells_.erase(found);
   robots_.erase(name);
   motion_.erase(name);
+  trail_.erase(name);
   return true;
 }
 
 void FleetRobots::setGeometry(const GridGeometry& geometry)
 {
-  const std::map<std::string, FleetRobot> known = robots_;
-  const std::map<std::string, std::pair<double, double>> motions = motion_;
-  clear();
+  clearCells();
   excluded_.release();  // sized for the old grid
   geometry_ = geometry;
+  rebuild();
+}
+
+void FleetRobots::rebuild()
+{
+  const std::map<std::string, FleetRobot> known = robots_;
+  const std::map<std::string, std::pair<double, double>> motions = motion_;
+  clearCells();
+  robots_.clear();
+  motion_.clear();
+  for (auto& entry : trail_)
+  {
+    for (PastFootprint& past : entry.second)
+    {
+      past.cells = rasterize(geometry_, past.footprint, params_.margin);
+    }
+  }
   for (const auto& entry : known)
   {
     const auto motion = motions.find(entry.first);
@@ -227,21 +275,27 @@ void FleetRobots::setGeometry(const GridGeometry& geometry)
   }
 }
 
-void FleetRobots::clear()
+void FleetRobots::clearCells()
 {
-  for (const auto& entry : cells_)
+  if (!excluded_.empty())
   {
-    for (std::uint32_t index : entry.second)
+    for (const auto& entry : cells_)
     {
-      if (!excluded_.empty())
+      for (std::uint32_t index : entry.second)
       {
         excluded_.reset(index);
       }
     }
   }
   cells_.clear();
+}
+
+void FleetRobots::clear()
+{
+  clearCells();
   robots_.clear();
   motion_.clear();
+  trail_.clear();
 }
 
 std::vector<std::string> FleetRobots::expire(double now_s)

@@ -129,6 +129,11 @@ TEST(FleetRobotsTable, BadRobotsAreRefusedAndChangeNothing)
   EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, -1.0 }), std::invalid_argument);
   EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, inf }), std::invalid_argument);
   EXPECT_THROW(robots.setParams(FleetRobotParams{ 100.0, 3.0 }), std::invalid_argument);
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, 3.0, -0.01 }), std::invalid_argument);
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, 3.0, nan }), std::invalid_argument);
+  EXPECT_THROW(FleetRobots(g, FleetRobotParams{ 0.2, 3.0, kMaxTrail + 0.01 }), std::invalid_argument);
+  EXPECT_NO_THROW(FleetRobots(g, FleetRobotParams{ 0.2, 3.0, kMaxTrail }));
+  EXPECT_NO_THROW(FleetRobots(g, FleetRobotParams{ 0.2, 3.0, 0.0 }));
 }
 
 TEST(FleetRobotsTable, MovesReplacesExpiresAndOverlaps)
@@ -167,8 +172,9 @@ TEST(FleetRobotsTable, ADrivingRobotsFrontIsCoveredUntilItsNextAdvert)
   // Adverts come at 2 Hz: a robot driving at 0.5 m/s is up to 0.25 m (plus transit) ahead of its last one, and
   // the cells its front covers there were shared as an obstacle in the fleet bench. The move between its last
   // two adverts is excluded once more ahead.
+  // No trail here: what is behind is the next test's.
   const GridGeometry g = grid();
-  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0 });
+  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0, 0.0 });
   unsigned int mx = 0, my = 0;
   ASSERT_TRUE(g.worldToMap(3.0 + 0.325 + 0.2 + 0.1, 2.0, mx, my));  // 0.1 m beyond footprint + margin, ahead
   const std::uint32_t ahead = g.getIndex(mx, my);
@@ -184,6 +190,81 @@ TEST(FleetRobotsTable, ADrivingRobotsFrontIsCoveredUntilItsNextAdvert)
   EXPECT_EQ(FleetRobots::rasterize(g, square(3.0, 2.0), 0.2), robots.excludedCells());
   robots.update(robot("robot_1", square(6.0, 2.0), 11.5));  // a 3 m jump (relocalised): not extrapolated
   EXPECT_EQ(FleetRobots::rasterize(g, square(6.0, 2.0), 0.2), robots.excludedCells());
+}
+
+/// The cell holding (x, y).
+std::uint32_t cellAt(const GridGeometry& g, double x, double y)
+{
+  unsigned int mx = 0, my = 0;
+  EXPECT_TRUE(g.worldToMap(x, y, mx, my));
+  return g.getIndex(mx, my);
+}
+
+TEST(FleetRobotsTable, ADrivingRobotsTrailStaysExcludedForTheTrailTime)
+{
+  // A layer marks a scan at its next costmap update against the newest footprint: a robot driving away has
+  // moved on since the scan saw its back. In the ten-robot fleet bench its back was shared 0.05-0.08 m beyond
+  // footprint + margin. Each footprint holds from its stamp until the next one's, and is excluded until the
+  // next one is `trail` old.
+  const GridGeometry g = grid();
+  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0, 1.0 });
+  const std::uint32_t behind = cellAt(g, 2.0 - 0.325 - 0.2 + 0.03, 2.0);  // inside the first footprint's margin
+  robots.replaceAll({ robot("robot_1", square(2.0, 2.0), 10.0) });
+  robots.replaceAll({ robot("robot_1", square(2.5, 2.0), 10.5) });    // drove 0.5 m along +x
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 11.0) });
+  EXPECT_TRUE(robots.excludes(behind)) << "where it was 1 s ago";
+  EXPECT_TRUE(robots.excludes(cellAt(g, 2.5, 2.0)));
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 11.49) });   // stopped; the 2.0 footprint held until 10.5
+  EXPECT_TRUE(robots.excludes(behind)) << "10.5 is 0.99 s before 11.49: inside the trail";
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 11.51) });
+  EXPECT_FALSE(robots.excludes(behind)) << "10.5 is 1.01 s before 11.51: outside the trail";
+  EXPECT_TRUE(robots.excludes(cellAt(g, 2.5 - 0.325, 2.0))) << "the 2.5 footprint held until 11.0";
+  robots.replaceAll({ robot("robot_1", square(3.0, 2.0), 12.01) });
+  EXPECT_EQ(FleetRobots::rasterize(g, square(3.0, 2.0), 0.2), robots.excludedCells());
+
+  // The trail survives a new margin and a moved grid, re-rasterized; it ends with the robot.
+  robots.replaceAll({ robot("robot_1", square(3.5, 2.0), 12.5) });
+  robots.setParams(FleetRobotParams{ 0.1, 3.0, 1.0 });
+  EXPECT_TRUE(robots.excludes(cellAt(g, 3.0 - 0.325 - 0.1 + 0.03, 2.0)));
+  EXPECT_FALSE(robots.excludes(cellAt(g, 3.0 - 0.325 - 0.1 - 0.03, 2.0))) << "the old margin";
+  robots.setGeometry(g);
+  EXPECT_TRUE(robots.excludes(cellAt(g, 3.0 - 0.325 - 0.1 + 0.03, 2.0)));
+  robots.forget("robot_1");
+  robots.replaceAll({ robot("robot_1", square(3.5, 2.0), 12.6) });
+  EXPECT_EQ(FleetRobots::rasterize(g, square(3.5, 2.0), 0.1), robots.excludedCells()) << "forgotten with it";
+  robots.replaceAll({ robot("robot_1", square(4.0, 2.0), 12.7) });
+  robots.replaceAll({});
+  robots.replaceAll({ robot("robot_1", square(4.0, 2.0), 12.8) });
+  EXPECT_EQ(FleetRobots::rasterize(g, square(4.0, 2.0), 0.1), robots.excludedCells()) << "left the message";
+}
+
+TEST(FleetRobotsTable, TrailEndsAtAJumpAClockGoingBackAndItsLength)
+{
+  const GridGeometry g = grid();
+  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0, 1.0 });
+  robots.update(robot("robot_1", square(2.0, 2.0), 10.0));
+  robots.update(robot("robot_1", square(4.1, 2.0), 10.1));  // 2.1 m in 0.1 s: relocalised, not driven
+  EXPECT_EQ(FleetRobots::rasterize(g, square(4.1, 2.0), 0.2), robots.excludedCells());
+  robots.update(robot("robot_1", square(4.3, 2.0), 10.2));  // 0.2 m (within 2 m): driven
+  robots.update(robot("robot_1", square(4.3, 2.0), 9.0));   // a restarted simulation
+  EXPECT_EQ(FleetRobots::rasterize(g, square(4.3, 2.0), 0.2), robots.excludedCells());
+
+  // At most kMaxTrailFootprints footprints, the current one among them, whatever their stamps.
+  const std::uint32_t first = cellAt(g, 1.0 - 0.325 - 0.2 + 0.03, 2.0);
+  robots.update(robot("robot_2", square(1.0, 2.0), 20.0));
+  for (std::size_t i = 1; i < kMaxTrailFootprints; ++i)
+  {
+    robots.update(robot("robot_2", square(1.0 + 0.1 * i, 2.0), 20.0));
+  }
+  EXPECT_TRUE(robots.excludes(first)) << kMaxTrailFootprints << " footprints kept";
+  robots.update(robot("robot_2", square(1.0 + 0.1 * kMaxTrailFootprints, 2.0), 20.0));
+  EXPECT_FALSE(robots.excludes(first)) << "one more: the first dropped";
+
+  // Trail 0: a robot that moves leaves nothing behind (the exclusion before the trail).
+  FleetRobots none(g, FleetRobotParams{ 0.2, 3.0, 0.0 });
+  none.update(robot("robot_1", square(2.0, 2.0), 10.0));
+  none.update(robot("robot_1", square(2.5, 2.0), 10.5));
+  EXPECT_FALSE(none.excludes(cellAt(g, 2.0 - 0.325 - 0.2 + 0.03, 2.0)));
 }
 
 TEST(FleetRobotsCore, StuckTriggerDoesNotShareAWaitingRobot)

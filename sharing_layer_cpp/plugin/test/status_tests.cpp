@@ -256,6 +256,16 @@ TEST(PluginLayer, DynamicReconfigureAppliesAtTheNextCycleAndRefusesABadValue)
   costmap.updateMap(5.0, 5.0, 0.0);
   EXPECT_EQ(3.0, layer->fleetRobotParams().timeout);
   EXPECT_EQ(0.5, layer->fleetRobotParams().margin);
+  negative.name = "robot_exclusion_trail";
+  negative.value = sharing_layer::kMaxTrail + 0.5;
+  timeout.request.config.doubles = { negative };
+  ASSERT_TRUE(reconfigure(ours, timeout));
+  EXPECT_EQ(1.0, doubleIn(timeout.response.config, "robot_exclusion_trail")) << "refused: longer than kMaxTrail";
+  negative.value = 0.5;
+  timeout.request.config.doubles = { negative };
+  ASSERT_TRUE(reconfigure(ours, timeout));
+  costmap.updateMap(5.0, 5.0, 0.0);
+  EXPECT_EQ(0.5, layer->fleetRobotParams().trail);
 }
 
 int main(int argc, char** argv)
