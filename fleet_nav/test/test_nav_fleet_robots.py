@@ -18,25 +18,30 @@ def test_defaults_and_both_namespaces():
     assert (params.robot_exclusion_margin, params.robot_timeout) == (0.35, 5.0) and unused == []
     params, _ = NavParams.from_dict({"sharing_layer": {"robot_exclusion_margin": 0.0, "robot_timeout": 0.0}})
     assert (params.robot_exclusion_margin, params.robot_timeout) == (0.0, 0.0)
+    assert params.robot_exclusion_trail == 1.0
+    for trail in (0.0, 10.0):  # the layer's limits, inclusive
+        params, _ = NavParams.from_dict({"sharing": {"robot_exclusion_trail": trail}})
+        assert params.robot_exclusion_trail == trail
 
 
 @pytest.mark.parametrize("key, value", [("robot_exclusion_margin", -0.1), ("robot_exclusion_margin", "wide"),
                                         ("robot_exclusion_margin", float("nan")), ("robot_exclusion_margin", 80.0),
                                         ("robot_timeout", -1.0), ("robot_timeout", float("inf")),
-                                        ("robot_timeout", True)])
+                                        ("robot_timeout", True), ("robot_exclusion_trail", -0.01),
+                                        ("robot_exclusion_trail", 10.01), ("robot_exclusion_trail", float("nan"))])
 def test_bad_values_name_the_parameter(key, value):
     with pytest.raises(ParameterError, match=key):
         NavParams.from_dict({"sharing": {key: value}})
 
 
 def test_the_layer_gets_them_and_leaves_a_fleet_robot_out():
-    params, _ = NavParams.from_dict({"sharing": {"robot_exclusion_margin": 0.3, "robot_timeout": 4.0},
-                                     "robot_radius": 0.2})
+    params, _ = NavParams.from_dict({"sharing": {"robot_exclusion_margin": 0.3, "robot_timeout": 4.0,
+                                                 "robot_exclusion_trail": 0.5}, "robot_radius": 0.2})
     occ = np.zeros((120, 200), dtype=np.int8)
     geometry = core.GridGeometry(0.05, 0.0, 0.0, 200, 120)
     cm = GlobalCostmap(geometry, occ.reshape(-1), params, core.LayerParams(robot_name="robot_0"))
     robots = cm.layer.fleet_robots
-    assert (robots.margin, robots.timeout) == (0.3, 4.0)
+    assert (robots.margin, robots.timeout, robots.trail) == (0.3, 4.0, 0.5)
     square = np.array([[4.0, 3.0], [4.6, 3.0], [4.6, 3.6], [4.0, 3.6]])
     robots.update("robot_1", square, 1.0)
     # the scan sees robot_1's body: nothing of it becomes shareable

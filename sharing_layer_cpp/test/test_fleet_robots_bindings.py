@@ -43,7 +43,7 @@ def ring_scan(origin, boxes, beams=720, max_range=10.0):
 def test_update_replace_expire_round_trip():
     c = core.SharingCore(grid(), core.LayerParams(robot_name="robot_0"))
     robots = c.fleet_robots
-    assert (robots.margin, robots.timeout) == (0.2, 3.0)
+    assert (robots.margin, robots.timeout, robots.trail) == (0.2, 3.0, 1.0)
     robots.update("robot_1", square(5.0, 5.0), 10.0)
     assert robots.names() == ["robot_1"] and len(robots) == 1
     assert robots.stamp("robot_1") == 10.0
@@ -86,12 +86,30 @@ def test_bad_footprints_raise_and_change_nothing(footprint, stamp, name, why):
     np.testing.assert_array_equal(before, c.fleet_robots.excluded_cells())
 
 
-@pytest.mark.parametrize("margin, timeout", [(-0.1, 3.0), (float("nan"), 3.0), (0.2, -1.0), (0.2, float("inf"))])
-def test_bad_params_raise(margin, timeout):
+@pytest.mark.parametrize("margin, timeout, trail", [(-0.1, 3.0, 1.0), (float("nan"), 3.0, 1.0), (0.2, -1.0, 1.0),
+                                                    (0.2, float("inf"), 1.0), (0.2, 3.0, -0.01), (0.2, 3.0, 10.01),
+                                                    (0.2, 3.0, float("nan"))])
+def test_bad_params_raise(margin, timeout, trail):
     c = core.SharingCore(grid(), core.LayerParams())
-    with pytest.raises(ValueError):
-        c.fleet_robots.set_params(margin=margin, timeout=timeout)
-    assert (c.fleet_robots.margin, c.fleet_robots.timeout) == (0.2, 3.0)
+    with pytest.raises(ValueError, match="robot_"):
+        c.fleet_robots.set_params(margin=margin, timeout=timeout, trail=trail)
+    assert (c.fleet_robots.margin, c.fleet_robots.timeout, c.fleet_robots.trail) == (0.2, 3.0, 1.0)
+
+
+def test_a_driving_robots_trail_is_excluded_for_the_trail_time():
+    c = core.SharingCore(grid(), core.LayerParams())
+    robots = c.fleet_robots
+    behind = int(core.FleetRobots.rasterize(grid(), [(1.525, 2.025)], 0.001)[0])  # a cell in the 2.0 footprint's margin
+    for stamp, x in ((10.0, 2.0), (10.5, 2.5), (11.49, 3.0)):
+        robots.update("robot_1", square(x, 2.0), stamp)
+    assert behind in robots.excluded_cells()
+    robots.update("robot_1", square(3.0, 2.0), 11.51)
+    assert behind not in robots.excluded_cells()
+    robots.set_params(trail=0.0)
+    robots.update("robot_1", square(2.5, 2.0), 11.6)  # backed up 0.5 m: no trail, only the look-ahead ahead
+    cells = set(robots.excluded_cells().tolist())
+    assert cells == set(core.FleetRobots.rasterize(grid(), square(2.5, 2.0), 0.2).tolist()) | set(
+        core.FleetRobots.rasterize(grid(), square(2.0, 2.0), 0.2).tolist())
 
 
 @pytest.mark.parametrize("known", [False, True])

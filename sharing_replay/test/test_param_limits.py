@@ -24,3 +24,13 @@ def test_png_scale_is_1_to_50_pixels_per_cell(tmp_path, value, accepted):
         assert code == report.EXIT_BAG_UNREADABLE and "does not exist" in text, text
     else:
         assert code == report.EXIT_USAGE and text == "replay: --png-scale must be 1..50, got %d\n" % value, text
+
+
+@pytest.mark.parametrize("value,accepted", [(0, True), (-0.01, False), (10, True), (10.01, False)])
+def test_robot_exclusion_trail_is_0_to_10_s(tmp_path, value, accepted):
+    """The layer's limits (FleetRobotParams): a trail longer than 10 s is not a scan's age but a robot's history."""
+    code, text = exit_code(tmp_path, "--param", "sharing/robot_exclusion_trail=%s" % value)
+    if accepted:
+        assert code == report.EXIT_BAG_UNREADABLE and "does not exist" in text, text
+    else:
+        assert code == report.EXIT_USAGE and "robot_exclusion_trail" in text, text

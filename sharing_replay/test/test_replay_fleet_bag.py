@@ -135,6 +135,7 @@ def test_replay_shares_what_the_live_fleet_shared_and_no_robot(truth):
     # Each robot's exclusion knew the four others, with the footprints the bag recorded.
     assert sorted(replay.others.frames) == ROBOTS
     assert sorted(replay.others.shapes) == ROBOTS
+    assert {layer.core.fleet_robots.trail for layer in replay.robots.values()} == {1.0}
 
 
 def test_without_recorded_footprints_the_parameters_place_the_robots(truth, tmp_path):
@@ -170,7 +171,7 @@ def test_command_line_replays_the_fleet_bag_clean(tmp_path):
     assert proc.stderr == ""
     assert "obstacles shared: 1 " in proc.stdout
     assert "other robots never shared: robot_0, robot_1, robot_2, robot_3, robot_4 (placed from tf; footprint " \
-           "recorded: robot_0, robot_1, robot_2, robot_3, robot_4; margin 0.2 m)" in proc.stdout, proc.stdout
+           "recorded: robot_0, robot_1, robot_2, robot_3, robot_4; margin 0.2 m, trail 1 s)" in proc.stdout, proc.stdout
     with open(os.path.join(str(tmp_path), "summary.json"), encoding="utf-8") as handle:
         summary = json.load(handle)
     assert summary["robot_exclusion"]["robots"] == {r: "recorded footprint" for r in ROBOTS}

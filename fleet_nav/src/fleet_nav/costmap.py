@@ -43,7 +43,8 @@ class GlobalCostmap:
         occupancy = np.asarray(occupancy).reshape(shape)
         self.static = static_costs(occupancy, params.lethal_cost_threshold, params.track_unknown_space)
         self.layer = core.SharingCore(geometry, layer_params)
-        self.layer.fleet_robots.set_params(margin=params.robot_exclusion_margin, timeout=params.robot_timeout)
+        self.layer.fleet_robots.set_params(margin=params.robot_exclusion_margin, timeout=params.robot_timeout,
+                                           trail=params.robot_exclusion_trail)
         self.layer.set_static_map(self.static)
         self.layer.set_unknown_map(occupancy == -1)  # unknown map cells are never shared
         self.inflator = nav.Inflator(geometry.resolution, params.inscribed_radius, params.inflation_radius,

@@ -11,7 +11,8 @@ Lookup order for a costmap key K: ``global_costmap/K``, ``global_costmap/inflati
 ``sharing/`` or ``sharing_layer/`` (static_tolerance, proposal_strategy, trigger_debounce,
 cluster_gap, min_cluster_cells, rectangle_padding, max_update_cells, static_occupied_cost, clearing_margin,
 clearing_scans, clearing_time, clearing_neighbours, trigger_memory, trigger_radius, memory_on_stuck_feedback,
-lease_renewal_interval), and the fleet-robot exclusion from the same place (robot_exclusion_margin, robot_timeout).
+lease_renewal_interval), and the fleet-robot exclusion from the same place (robot_exclusion_margin, robot_timeout,
+robot_exclusion_trail).
 """
 import ast
 import math
@@ -137,10 +138,12 @@ class NavParams:
     # the sharing layer's plan-blocked trigger (the plugin's plan_topics; empty there = off)
     plan_trigger: bool = True
     sharing: Dict[str, object] = field(default_factory=dict)
-    # fleet robots are never shared: cells within a known robot's footprint plus this margin (m), and
-    # robots not heard for robot_timeout (s) are forgotten (the layer's FleetRobots)
+    # fleet robots are never shared: cells within a known robot's footprint plus this margin (m), and its
+    # footprints of the last robot_exclusion_trail s; robots not heard for robot_timeout (s) are forgotten
+    # (the layer's FleetRobots)
     robot_exclusion_margin: float = 0.2
     robot_timeout: float = 3.0
+    robot_exclusion_trail: float = 1.0
     map_wait_log_period: float = 5.0
 
     def __post_init__(self):
@@ -171,6 +174,7 @@ class NavParams:
             raise ParameterError("parameter footprint needs at least 3 points, got %r" % (self.footprint,))
         _number("robot_exclusion_margin", self.robot_exclusion_margin, low=0.0, high=50.0)
         _number("robot_timeout", self.robot_timeout, low=0.0)
+        _number("robot_exclusion_trail", self.robot_exclusion_trail, low=0.0, high=10.0)
 
     @property
     def inscribed_radius(self):
@@ -293,7 +297,7 @@ class NavParams:
             num(name, take([name], getattr(cls, name)))
         flag("sharing_enabled", take(["sharing_enabled"], True))
         flag("plan_trigger", take(["sharing/plan_trigger", "sharing_layer/plan_trigger"], True))
-        for key in ("robot_exclusion_margin", "robot_timeout"):
+        for key in ("robot_exclusion_margin", "robot_timeout", "robot_exclusion_trail"):
             num(key, take(["sharing/" + key, "sharing_layer/" + key], getattr(cls, key)))
         sharing = {}
         for key in SHARING_KEYS:

@@ -70,6 +70,7 @@ class ReplaySettings:
     robot_exclusion: bool = True
     robot_exclusion_margin: float = 0.2
     robot_timeout: float = 3.0
+    robot_exclusion_trail: float = 1.0
     footprint: Tuple[Tuple[float, float], ...] = DEFAULT_FOOTPRINT
     # a --map that is not the bag's /map (resolution, origin, size) is refused unless this is set
     allow_map_mismatch: bool = False
@@ -103,6 +104,10 @@ class ReplaySettings:
                 raise InputError("%s must be a non-empty name, got %r" % (name, value))
         positive("robot_timeout", allow_zero=True)
         positive("robot_exclusion_margin", allow_zero=True)
+        positive("robot_exclusion_trail", allow_zero=True)
+        if self.robot_exclusion_trail > 10.0:
+            raise InputError("robot_exclusion_trail must be 0..10 s (the layer's limit), got %r"
+                             % (self.robot_exclusion_trail,))
         if len(self.footprint) < 1 or not all(len(p) == 2 and all(math.isfinite(v) for v in p) for p in self.footprint):
             raise InputError("footprint must be a list of finite [x, y] points, got %r" % (self.footprint,))
         for robot, t in self.trigger_at:
@@ -157,13 +162,13 @@ def load_params_tree(paths, overrides):
 
 def exclusion_from_tree(tree):
     """The fleet-robot exclusion's settings (ReplaySettings keywords) via fleet_nav's reader: footprint
-    (padded, or a 16-gon of robot_radius), robot_exclusion_margin, robot_timeout."""
+    (padded, or a 16-gon of robot_radius), robot_exclusion_margin, robot_timeout, robot_exclusion_trail."""
     try:
         params, _unused = NavParams.from_dict(tree)
     except ParameterError as err:
         raise InputError("bad parameter: %s" % err) from None
     return dict(footprint=tuple(params.footprint_polygon), robot_exclusion_margin=params.robot_exclusion_margin,
-                robot_timeout=params.robot_timeout)
+                robot_timeout=params.robot_timeout, robot_exclusion_trail=params.robot_exclusion_trail)
 
 
 def layer_kwargs_from_tree(tree):

@@ -139,6 +139,7 @@ def robot_exclusion(replay):
     if others is None:
         return {"on": replay.settings.robot_exclusion, "robots": {}}
     return {"on": True, "margin": replay.settings.robot_exclusion_margin, "timeout": replay.settings.robot_timeout,
+            "trail": replay.settings.robot_exclusion_trail,
             "robots": {name: others.footprint_source(name) for name in sorted(others.frames)},
             "unplaced_scans": dict(sorted(others.unplaced.items()))}
 
@@ -167,9 +168,10 @@ def summary_text(summary):
         groups = [(label, [r for r, source in exclusion["robots"].items() if source == key])
                   for key, label in (("recorded footprint", "footprint recorded"),
                                      ("parameters", "footprint of the parameters"))]
-        lines.append("other robots never shared: %s (placed from tf; %s; margin %g m)" % (
+        lines.append("other robots never shared: %s (placed from tf; %s; margin %g m, trail %g s)" % (
             ", ".join(exclusion["robots"]), "; ".join("%s: %s" % (label, ", ".join(names))
-                                                       for label, names in groups if names), exclusion["margin"]))
+                                                       for label, names in groups if names), exclusion["margin"],
+            exclusion["trail"]))
     elif not exclusion["on"]:
         lines.append("other robots: NOT excluded (--no-robot-exclusion): robots in view may be shared")
     silent = [name for name, found in summary["trigger_sources"].items() if not found]

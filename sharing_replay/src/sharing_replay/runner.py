@@ -53,7 +53,8 @@ class _Robot:
         except (TypeError, ValueError) as err:
             raise InputError("bad layer parameter: %s" % err) from None
         self.core = core.SharingCore(self.geometry, params)
-        self.core.fleet_robots.set_params(margin=s.robot_exclusion_margin, timeout=s.robot_timeout)
+        self.core.fleet_robots.set_params(margin=s.robot_exclusion_margin, timeout=s.robot_timeout,
+                                          trail=s.robot_exclusion_trail)
         self.core.set_static_map(replay.static)
         # Unknown map cells (and cells near them) are never shared, as in the plugin.
         self.core.set_unknown_map(np.ascontiguousarray(m.occupancy == -1))
