@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <stdexcept>
 
 namespace sharing_layer
@@ -129,6 +130,56 @@ std::pair<double, double> centroid(const std::vector<std::pair<double, double>>&
 }
 }  // namespace
 
+std::vector<std::uint32_t> FleetRobots::unite(const std::vector<const std::vector<std::uint32_t>*>& parts)
+{
+  std::uint32_t lo = std::numeric_limits<std::uint32_t>::max(), hi = 0;
+  std::size_t total = 0;
+  for (const std::vector<std::uint32_t>* part : parts)
+  {
+    if (!part->empty())
+    {
+      lo = std::min(lo, part->front());  // each part is sorted
+      hi = std::max(hi, part->back());
+      total += part->size();
+    }
+  }
+  std::vector<std::uint32_t> cells;
+  if (total == 0)
+  {
+    return cells;
+  }
+  cells.reserve(total);
+  // A second of footprints overlaps itself ten times over: a bit per cell between the lowest and the highest
+  // index (the rows the trail spans) is cheaper than sorting them all, unless those rows are far apart.
+  const std::uint64_t span = static_cast<std::uint64_t>(hi) - lo + 1;
+  if (span > 64 * total)
+  {
+    for (const std::vector<std::uint32_t>* part : parts)
+    {
+      cells.insert(cells.end(), part->begin(), part->end());
+    }
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    return cells;
+  }
+  scratch_.assign(static_cast<std::size_t>((span + 63) / 64), 0);
+  for (const std::vector<std::uint32_t>* part : parts)
+  {
+    for (std::uint32_t index : *part)
+    {
+      scratch_[(index - lo) / 64] |= std::uint64_t{ 1 } << ((index - lo) % 64);
+    }
+  }
+  for (std::size_t w = 0; w < scratch_.size(); ++w)
+  {
+    for (std::uint64_t bits = scratch_[w]; bits != 0; bits &= bits - 1)
+    {
+      cells.push_back(lo + static_cast<std::uint32_t>(w * 64 + __builtin_ctzll(bits)));
+    }
+  }
+  return cells;
+}
+
 void FleetRobots::update(const FleetRobot& robot)
 {
   const auto known = robots_.find(robot.name);
@@ -141,7 +192,8 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
 {
   check(robot);
   const std::vector<std::uint32_t> own = rasterize(geometry_, robot.footprint, params_.margin);
-  std::vector<std::uint32_t> cells = own;
+  std::vector<const std::vector<std::uint32_t>*> parts{ &own };
+  std::vector<std::uint32_t> ahead_cells;
   bool jumped = false;
   // A driving robot is where its next advert will put it before that advert arrives: the footprint moved
   // on by as much as it moved since the previous advert is excluded too (the cells a moving robot's front
@@ -171,8 +223,8 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
       p.first += motion.first;
       p.second += motion.second;
     }
-    const std::vector<std::uint32_t> more = rasterize(geometry_, ahead, params_.margin);
-    cells.insert(cells.end(), more.begin(), more.end());
+    ahead_cells = rasterize(geometry_, ahead, params_.margin);
+    parts.push_back(&ahead_cells);
   }
   // Behind it, where it was while the scans the layer has yet to mark were taken. A footprint holds from its
   // stamp until the next one's, so it is dropped once the next one is older than the trail.
@@ -191,10 +243,9 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   }
   for (std::size_t i = 0; i + 1 < past.size(); ++i)
   {
-    cells.insert(cells.end(), past[i].cells.begin(), past[i].cells.end());
+    parts.push_back(&past[i].cells);
   }
-  std::sort(cells.begin(), cells.end());
-  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  std::vector<std::uint32_t> cells = unite(parts);
   auto found = cells_.find(robot.name);
   if (found != cells_.end())
   {

@@ -267,6 +267,41 @@ TEST(FleetRobotsTable, TrailEndsAtAJumpAClockGoingBackAndItsLength)
   EXPECT_FALSE(none.excludes(cellAt(g, 2.0 - 0.325 - 0.2 + 0.03, 2.0)));
 }
 
+TEST(FleetRobotsTable, TrailCellsAreTheUnionOfItsFootprints)
+{
+  // The trail's cells are gathered through a bit per cell over the rows it spans, or sorted when those rows
+  // are far apart (a wide grid, a robot driving along y): both must give the plain union.
+  for (const GridGeometry& g : { grid(), GridGeometry(0.05, 0.0, 0.0, 20000, 200) })
+  {
+    FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0, 1.0 });
+    std::vector<Polygon> held;
+    for (int k = 0; k < 12; ++k)
+    {
+      const Polygon now = square(2.0 + 0.02 * k, 2.0 + 0.13 * k);
+      robots.update(robot("robot_1", now, 10.0 + 0.1 * k + (k == 11 ? 0.05 : 0.0)));
+      held.push_back(now);
+    }
+    // Stamps 10.0 .. 11.0, then 11.15: the footprint of 10.0 held until 10.1, 1.05 s before: dropped.
+    std::vector<std::uint32_t> expected;
+    for (std::size_t k = 1; k < held.size(); ++k)
+    {
+      const std::vector<std::uint32_t> cells = FleetRobots::rasterize(g, held[k], 0.2);
+      expected.insert(expected.end(), cells.begin(), cells.end());
+    }
+    Polygon ahead = held.back();
+    for (auto& p : ahead)
+    {
+      p.first += 0.02;
+      p.second += 0.13;
+    }
+    const std::vector<std::uint32_t> more = FleetRobots::rasterize(g, ahead, 0.2);
+    expected.insert(expected.end(), more.begin(), more.end());
+    std::sort(expected.begin(), expected.end());
+    expected.erase(std::unique(expected.begin(), expected.end()), expected.end());
+    EXPECT_EQ(expected, robots.excludedCells()) << "grid " << g.size_x << " x " << g.size_y;
+  }
+}
+
 TEST(FleetRobotsCore, StuckTriggerDoesNotShareAWaitingRobot)
 {
   Scene scene;

@@ -129,6 +129,8 @@ private:
   void clearCells();
   /// @brief Excludes the known robots anew (after the grid or the margin changed): their trails re-rasterized.
   void rebuild();
+  /// @brief The union of sorted cell lists, sorted, without duplicates.
+  std::vector<std::uint32_t> unite(const std::vector<const std::vector<std::uint32_t>*>& parts);
   /// @brief Excludes cells (a robot's new footprint).
   void include(const std::vector<std::uint32_t>& cells);
   /// @brief Ends the exclusion of a robot's cells (its entry in cells_), except where another robot covers them.
@@ -141,6 +143,7 @@ private:
   std::map<std::string, std::pair<double, double>> motion_;   ///< per robot: its move between its last two adverts
   std::map<std::string, std::deque<PastFootprint>> trail_;    ///< per robot: its footprints of the last trail s
   BitGrid excluded_;  ///< per cell: within a known robot's footprint plus margin (allocated on the first robot)
+  std::vector<std::uint64_t> scratch_;  ///< unite()'s bits, kept between calls
 };
 
 }  // namespace sharing_layer
