@@ -101,10 +101,10 @@ void SharingLayer::onInitialize()
   }
   warnAboutSetup(adopted, private_nh.getNamespace());
   wireTopics(config);
-  ROS_INFO("SharingLayer %s (%s): fleet robots from [%s] are never shared (footprint + %.2f m, forgotten after "
-           "%.1f s)",
+  ROS_INFO("SharingLayer %s (%s): fleet robots from [%s] are never shared (footprint + %.2f m, and where they were "
+           "in the last %.1f s; forgotten after %.1f s)",
            name_.c_str(), params_.robot_name.c_str(), config.fleet_robots_topic.c_str(), fleet_params_.margin,
-           fleet_params_.timeout);
+           fleet_params_.trail, fleet_params_.timeout);
   ROS_INFO("SharingLayer %s (%s): clearing after %u scans over %.1f s seen free %.2f m before the beam ends; "
            "trigger memory %.1f s within %.2f m; plan trigger on [%s] within %.2f m of the plan; unknown cells "
            "from [%s]",
