@@ -191,8 +191,7 @@ void FleetRobots::update(const FleetRobot& robot)
 void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, std::pair<double, double> motion)
 {
   check(robot);
-  const std::vector<std::uint32_t> own = rasterize(geometry_, robot.footprint, params_.margin);
-  std::vector<const std::vector<std::uint32_t>*> parts{ &own };
+  std::vector<const std::vector<std::uint32_t>*> parts;
   std::vector<std::uint32_t> ahead_cells;
   bool jumped = false;
   // A driving robot is where its next advert will put it before that advert arrives: the footprint moved
@@ -226,8 +225,9 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
     ahead_cells = rasterize(geometry_, ahead, params_.margin);
     parts.push_back(&ahead_cells);
   }
-  // Behind it, where it was while the scans the layer has yet to mark were taken. A footprint holds from its
-  // stamp until the next one's, so it is dropped once the next one is older than the trail.
+  // Its footprint now (the trail's last), and behind it where it was while the scans the layer has yet to mark
+  // were taken. A footprint holds from its stamp until the next one's, so it is dropped once the next one is
+  // older than the trail. The same footprint again is not rasterized again.
   std::deque<PastFootprint>& past = trail_[robot.name];
   if (jumped || (!past.empty() && robot.stamp < past.back().stamp))
   {
@@ -235,15 +235,16 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   }
   if (past.empty() || past.back().footprint != robot.footprint)
   {
-    past.push_back(PastFootprint{ robot.stamp, robot.footprint, own });
+    past.push_back(
+        PastFootprint{ robot.stamp, robot.footprint, rasterize(geometry_, robot.footprint, params_.margin) });
   }
   while (past.size() >= 2 && (past[1].stamp <= robot.stamp - params_.trail || past.size() > kMaxTrailFootprints))
   {
     past.pop_front();
   }
-  for (std::size_t i = 0; i + 1 < past.size(); ++i)
+  for (const PastFootprint& footprint : past)
   {
-    parts.push_back(&past[i].cells);
+    parts.push_back(&footprint.cells);
   }
   std::vector<std::uint32_t> cells = unite(parts);
   auto found = cells_.find(robot.name);
@@ -267,18 +268,16 @@ void FleetRobots::replaceAll(const std::vector<FleetRobot>& robots)
   clearCells();
   robots_.clear();
   motion_.clear();
-  for (auto it = trail_.begin(); it != trail_.end();)
-  {
-    const bool listed = std::any_of(robots.begin(), robots.end(),
-                                    [&](const FleetRobot& robot) { return robot.name == it->first; });
-    it = listed ? std::next(it) : trail_.erase(it);
-  }
   for (const FleetRobot& robot : robots)
   {
     const auto known = previous.find(robot.name);
     const auto motion = motions.find(robot.name);
     update(robot, known == previous.end() ? nullptr : &known->second,
            motion == motions.end() ? std::make_pair(0.0, 0.0) : motion->second);
+  }
+  for (auto it = trail_.begin(); it != trail_.end();)  // the trails of robots the message left out
+  {
+    it = robots_.count(it->first) != 0 ? std::next(it) : trail_.erase(it);
   }
 }
 
@@ -299,8 +298,7 @@ bool FleetRobots::forget(const std::string& name)
 
 void FleetRobots::setGeometry(const GridGeometry& geometry)
 {
-  clearCells();
-  excluded_.release();  // sized for the old grid
+  excluded_.release();  // sized for the old grid; rebuild() clears the cell lists
   geometry_ = geometry;
   rebuild();
 }

@@ -117,7 +117,7 @@ public:
   static void check(const FleetRobot& robot);
 
 private:
-  /// @brief One footprint a robot had, from `stamp` until its next one, with the cells it covers.
+  /// @brief One footprint a robot had (the last: has), from `stamp` until its next one, with the cells it covers.
   struct PastFootprint
   {
     double stamp = 0.0;
@@ -141,7 +141,7 @@ private:
   std::map<std::string, FleetRobot> robots_;
   std::map<std::string, std::vector<std::uint32_t>> cells_;   ///< per robot: the cells it excludes
   std::map<std::string, std::pair<double, double>> motion_;   ///< per robot: its move between its last two adverts
-  std::map<std::string, std::deque<PastFootprint>> trail_;    ///< per robot: its footprints of the last trail s
+  std::map<std::string, std::deque<PastFootprint>> trail_;    ///< per robot: its footprint now and of the last trail s
   BitGrid excluded_;  ///< per cell: within a known robot's footprint plus margin (allocated on the first robot)
   std::vector<std::uint64_t> scratch_;  ///< unite()'s bits, kept between calls
 };
