@@ -310,6 +310,63 @@ def test_every_corridor_leaves_room_for_the_robot_turning_in_place(layout):
         assert door >= swept, "the dead end's door: %.2f m wide, the robot needs %.2f" % (door, swept)
 
 
+def goal_tolerance_of_config():
+    """base_local_planner's xy_goal_tolerance (config/move_base; its default 0.1 m where the file is silent)."""
+    path = os.path.join(os.path.dirname(WORLDS), "config", "move_base", "base_local_planner_params.yaml")
+    with open(path) as f:
+        return float(yaml.safe_load(f)["TrajectoryPlannerROS"].get("xy_goal_tolerance", 0.1))
+
+
+def distance_to_walls_and_blocks(x, y, m, blocks):
+    """m from (x, y) to the nearest occupied map cell's edge or block's edge."""
+    occupied, cx, cy = occupied_world_grid(m)
+    half = m.resolution / 2
+    dx = np.maximum(np.abs(cx[occupied] - x) - half, 0.0)
+    dy = np.maximum(np.abs(cy[occupied] - y) - half, 0.0)
+    nearest = float(np.hypot(dx, dy).min())
+    for b in blocks.values():
+        bdx = max(abs(b["pose"][0] - x) - b["size"][0] / 2, 0.0)
+        bdy = max(abs(b["pose"][1] - y) - b["size"][1] / 2, 0.0)
+        nearest = min(nearest, math.hypot(bdx, bdy))
+    return nearest
+
+
+def turning_room(layout):
+    """m a robot needs from a goal to the nearest wall or block: it stops anywhere within xy_goal_tolerance and
+    then turns in place to the goal's yaw, sweeping the circle of its padded footprint's farthest corner."""
+    footprint, padding = footprint_of_config()
+    return max(math.hypot(x, y) for x, y in footprint) + padding + goal_tolerance_of_config()
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_every_goal_leaves_room_for_the_robot_turning_in_place_there(layout):
+    """A goal closer to a wall than that leaves base_local_planner no way in: sent 0.35 m from the facility's right
+    corridor wall, robot_1 turned in place 0.15 m short for ever, its goal ACTIVE; Test 1's old wait_1, 0.45 m from
+    it, was not reached in two tries of 120 s in CI."""
+    desc, m = facility(layout), map_of(layout)
+    need = turning_room(layout)
+    goals = dict(desc["goals"])
+    goals.update({"bench_goals[%d]" % k: g for k, g in enumerate(desc.get("bench_goals", []))})
+    for name, (x, y, _yaw) in sorted(goals.items()):
+        room = distance_to_walls_and_blocks(x, y, m, desc["blocks"])
+        assert room >= need, "%s goal %s (%.2f, %.2f): %.3f m to the nearest wall or block, a robot turning there " \
+                             "needs %.3f" % (layout, name, x, y, room, need)
+
+
+def test_a_goal_without_turning_room_is_caught():
+    """The check above measures: Test 1's old wait_1 (11.75, 4.2) fails it, its new place passes, and a goal
+    just inside and just outside the room at the facility's right corridor wall (x = 12.2) are told apart."""
+    desc, m = facility("facility"), map_of("facility")
+    need = turning_room("facility")
+    wall = 12.2
+    assert distance_to_walls_and_blocks(11.75, 4.2, m, desc["blocks"]) < need
+    assert distance_to_walls_and_blocks(*desc["goals"]["wait_1"][:2], m, desc["blocks"]) >= need
+    assert distance_to_walls_and_blocks(wall - need - 0.01, 4.2, m, desc["blocks"]) >= need
+    assert distance_to_walls_and_blocks(wall - need + 0.01, 4.2, m, desc["blocks"]) < need
+    # a block counts: 0.5 m below block_right's lower face (y = 4.95) is too close
+    assert distance_to_walls_and_blocks(11.3, 4.45, m, desc["blocks"]) < need
+
+
 def test_the_worlds_raster_is_the_one_ground_truth_allows_for():
     from fleet_tests.ground_truth import SIMULATOR_RASTER
     for layout in LAYOUTS:
