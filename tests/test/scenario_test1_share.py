@@ -85,7 +85,7 @@ class Test1Share(FleetTestCase):
             self.assertEqual([], beyond[:3], "robot_0 passed %s" % name)
 
         # robot_1 leaves the corridor; it has both obstacles (through MQTT) before it is sent on.
-        self.assert_succeeded(r1, "start_1", r1.go("start_1", 200.0))
+        self.place(r1, "start_1", 200.0)
         fleet.wait_until(lambda: len(r1.obstacles()) == len(blocks), 20.0, "robot_1 to hold both obstacles")
         sent = r1.send("purple")
         self.assert_succeeded(r1, "purple", r1.wait(300.0))

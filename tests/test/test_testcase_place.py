@@ -37,6 +37,12 @@ def test_a_goal_given_up_once_is_sent_again():
     assert robot.sent == ["wait_1", "wait_1"]
 
 
+def test_a_goal_not_reached_in_time_is_sent_again():
+    robot = StandInRobot([(False, "ACTIVE", "This goal has been accepted by the simple action server"), SUCCEEDED])
+    Case().place(robot, "start_1", 200.0)
+    assert robot.sent == ["start_1", "start_1"]
+
+
 def test_a_goal_reached_at_once_is_sent_once():
     robot = StandInRobot([SUCCEEDED])
     Case().place(robot, "wait_1", 120.0)

@@ -37,8 +37,10 @@ class FleetTestCase(unittest.TestCase):
 
     def place(self, robot, goal, timeout):
         """Drives ``robot`` to ``goal`` to set a scene up: a second try when move_base gives up on the way (its controller
-        finds no valid control on a starved machine: seen at load 6.8 on robot_1's way to wait_1, 0.6 m short). Where a
-        robot stands before the test begins is not what the test is of; what it then does is, and is asserted."""
+        finds no valid control on a starved machine: seen at load 6.8 on robot_1's way to wait_1, 0.6 m short) or has
+        not arrived by ``timeout`` (base_local_planner turning in place for ever 0.4 m short of start_1, at load 7;
+        the new goal gives it a new plan). Where a robot stands before the test begins is not what the test is of;
+        what it then does is, and is asserted."""
         result = robot.go(goal, timeout)
         if not (result[0] and result[1] == "SUCCEEDED"):
             rospy.logwarn("%s: %s not reached (%s %s); sending it again", robot.name, goal, result[1], result[2])
