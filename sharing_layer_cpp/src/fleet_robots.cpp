@@ -130,6 +130,14 @@ std::pair<double, double> centroid(const std::vector<std::pair<double, double>>&
 }
 }  // namespace
 
+bool FleetRobots::drivable(const std::deque<PastFootprint>& past, std::pair<double, double> here, double stamp)
+{
+  return std::all_of(past.begin(), past.end(), [&](const PastFootprint& kept) {
+    const double reach = kMaxTrailSpeed * std::max(0.0, stamp - kept.stamp) + kTrailSlack;
+    return std::hypot(here.first - kept.centroid.first, here.second - kept.centroid.second) <= reach;
+  });
+}
+
 std::vector<std::uint32_t> FleetRobots::unite(const std::vector<const std::vector<std::uint32_t>*>& parts)
 {
   std::uint32_t lo = std::numeric_limits<std::uint32_t>::max(), hi = 0;
@@ -229,14 +237,15 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   // were taken. A footprint holds from its stamp until the next one's, so it is dropped once the next one is
   // older than the trail. The same footprint again is not rasterized again.
   std::deque<PastFootprint>& past = trail_[robot.name];
-  if (jumped || (!past.empty() && robot.stamp < past.back().stamp))
+  const auto here = centroid(robot.footprint);
+  if (jumped || (!past.empty() && robot.stamp < past.back().stamp) || !drivable(past, here, robot.stamp))
   {
     past.clear();
   }
   if (past.empty() || past.back().footprint != robot.footprint)
   {
-    past.push_back(
-        PastFootprint{ robot.stamp, robot.footprint, rasterize(geometry_, robot.footprint, params_.margin) });
+    past.push_back(PastFootprint{ robot.stamp, robot.footprint, here,
+                                  rasterize(geometry_, robot.footprint, params_.margin) });
   }
   while (past.size() >= 2 && (past[1].stamp <= robot.stamp - params_.trail || past.size() > kMaxTrailFootprints))
   {

@@ -249,22 +249,50 @@ TEST(FleetRobotsTable, TrailEndsAtAJumpAClockGoingBackAndItsLength)
   robots.update(robot("robot_1", square(4.3, 2.0), 9.0));   // a restarted simulation
   EXPECT_EQ(FleetRobots::rasterize(g, square(4.3, 2.0), 0.2), robots.excludedCells());
 
-  // At most kMaxTrailFootprints footprints, the current one among them, whatever their stamps.
+  // At most kMaxTrailFootprints footprints, the current one among them, however long the trail (0.1 m per 0.05 s,
+  // 2 m/s: one trail).
+  FleetRobots longTrail(g, FleetRobotParams{ 0.2, 3.0, kMaxTrail });
   const std::uint32_t first = cellAt(g, 1.0 - 0.325 - 0.2 + 0.03, 2.0);
-  robots.update(robot("robot_2", square(1.0, 2.0), 20.0));
+  longTrail.update(robot("robot_2", square(1.0, 2.0), 20.0));
   for (std::size_t i = 1; i < kMaxTrailFootprints; ++i)
   {
-    robots.update(robot("robot_2", square(1.0 + 0.1 * i, 2.0), 20.0));
+    longTrail.update(robot("robot_2", square(1.0 + 0.1 * i, 2.0), 20.0 + 0.05 * i));
   }
-  EXPECT_TRUE(robots.excludes(first)) << kMaxTrailFootprints << " footprints kept";
-  robots.update(robot("robot_2", square(1.0 + 0.1 * kMaxTrailFootprints, 2.0), 20.0));
-  EXPECT_FALSE(robots.excludes(first)) << "one more: the first dropped";
+  EXPECT_TRUE(longTrail.excludes(first)) << kMaxTrailFootprints << " footprints kept";
+  longTrail.update(robot("robot_2", square(1.0 + 0.1 * kMaxTrailFootprints, 2.0), 20.0 + 0.05 * kMaxTrailFootprints));
+  EXPECT_FALSE(longTrail.excludes(first)) << "one more: the first dropped";
 
   // Trail 0: a robot that moves leaves nothing behind (the exclusion before the trail).
   FleetRobots none(g, FleetRobotParams{ 0.2, 3.0, 0.0 });
   none.update(robot("robot_1", square(2.0, 2.0), 10.0));
   none.update(robot("robot_1", square(2.5, 2.0), 10.5));
   EXPECT_FALSE(none.excludes(cellAt(g, 2.0 - 0.325 - 0.2 + 0.03, 2.0)));
+}
+
+TEST(FleetRobotsTable, TrailEndsAtAStepNoRobotDrives)
+{
+  // A peer's login does not make its footprint true: one whose adverts race about must not leave a trail along
+  // the path it made up. A footprint farther from a kept one than kMaxTrailSpeed allows in the time between them
+  // (plus kTrailSlack) starts the trail anew.
+  const GridGeometry g = grid();
+  FleetRobots robots(g, FleetRobotParams{ 0.2, 3.0, 1.0 });
+  const double reach = kMaxTrailSpeed * 0.2 + kTrailSlack;  // 0.2 s after the first footprint
+  const std::uint32_t behind = cellAt(g, 1.0 - 0.325 - 0.2 + 0.03, 2.0);
+  robots.update(robot("robot_1", square(1.0, 2.0), 10.0));
+  robots.update(robot("robot_1", square(1.0 + reach - 0.01, 2.0), 10.2));
+  EXPECT_TRUE(robots.excludes(behind)) << "just inside what a robot drives in 0.2 s";
+  robots.update(robot("robot_2", square(1.0, 5.0), 10.0));
+  robots.update(robot("robot_2", square(1.0 + reach + 0.01, 5.0), 10.2));
+  EXPECT_FALSE(robots.excludes(cellAt(g, 1.0 - 0.325 - 0.2 + 0.03, 5.0))) << "just outside: the trail starts anew";
+  EXPECT_TRUE(robots.excludes(cellAt(g, 1.0 + reach + 0.01, 5.0))) << "where it is now stays excluded";
+
+  // Against every footprint kept, not only the last: the slack does not add up over steps with no time between.
+  robots.update(robot("robot_3", square(1.0, 8.0), 10.0));
+  robots.update(robot("robot_3", square(1.0 + 0.45, 8.0), 10.0));
+  EXPECT_TRUE(robots.excludes(cellAt(g, 1.0 - 0.325 - 0.2 + 0.03, 8.0))) << "0.45 m: within the slack";
+  robots.update(robot("robot_3", square(1.0 + 0.9, 8.0), 10.0));
+  EXPECT_FALSE(robots.excludes(cellAt(g, 1.0 - 0.325 - 0.2 + 0.03, 8.0))) << "0.9 m from the first in no time";
+  EXPECT_FALSE(robots.excludes(cellAt(g, 1.45 - 0.325 - 0.2 + 0.03, 8.0))) << "0.45 m from the last, but one trail";
 }
 
 TEST(FleetRobotsTable, TrailCellsAreTheUnionOfItsFootprints)

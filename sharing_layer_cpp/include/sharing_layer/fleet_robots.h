@@ -43,6 +43,14 @@ constexpr std::size_t kMaxFootprintPoints = 1000;
 constexpr double kMaxTrail = 10.0;
 /// Most past footprints kept per robot (a robot refreshed at 10 Hz keeps ten for the default 1 s trail).
 constexpr std::size_t kMaxTrailFootprints = 64;
+/// Fastest a fleet robot drives, m/s, for its footprints to make one trail: a footprint farther from one kept
+/// than this speed allows in the time between them (plus kTrailSlack) starts the trail anew. A peer's login
+/// does not make its adverts true: one racing its footprint about would otherwise leave up to
+/// kMaxTrailFootprints footprints along a path it made up, none of whose cells the layer would share.
+constexpr double kMaxTrailSpeed = 5.0;
+/// m of a robot's advertised position the time between two footprints does not account for: a dead-reckoned
+/// footprint corrected by the next advert, stamps taken when a bridge heard it.
+constexpr double kTrailSlack = 0.5;
 
 /**
  * @brief The fleet robots a layer knows, and the grid cells they cover: every cell whose centre lies
@@ -71,7 +79,8 @@ public:
   /// @brief As update(robot); when the robot moved since `previous` (its last known footprint), the footprint
   /// moved on by as much is excluded too, so a driving robot's front is covered until its next refresh.
   /// Its footprints of the last `trail` s (by its stamps) stay excluded behind it; a jump of more than 2 m
-  /// (relocalised, restarted) or a stamp older than the last one ends that trail.
+  /// (relocalised, restarted), a stamp older than the last one, or a footprint no robot drives to from a kept
+  /// one in the time between them (kMaxTrailSpeed) ends that trail.
   void update(const FleetRobot& robot, const FleetRobot* previous, std::pair<double, double> motion);
 
   /**
@@ -122,6 +131,7 @@ private:
   {
     double stamp = 0.0;
     std::vector<std::pair<double, double>> footprint;
+    std::pair<double, double> centroid;
     std::vector<std::uint32_t> cells;
   };
 
@@ -129,6 +139,8 @@ private:
   void clearCells();
   /// @brief Excludes the known robots anew (after the grid or the margin changed): their trails re-rasterized.
   void rebuild();
+  /// @brief Whether a robot at `here` at `stamp` could have driven from every footprint kept (kMaxTrailSpeed).
+  static bool drivable(const std::deque<PastFootprint>& past, std::pair<double, double> here, double stamp);
   /// @brief The union of sorted cell lists, sorted, without duplicates.
   std::vector<std::uint32_t> unite(const std::vector<const std::vector<std::uint32_t>*>& parts);
   /// @brief Excludes cells (a robot's new footprint).
