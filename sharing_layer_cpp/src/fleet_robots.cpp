@@ -201,6 +201,7 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   check(robot);
   std::vector<const std::vector<std::uint32_t>*> parts;
   std::vector<std::uint32_t> ahead_cells;
+  const auto here = centroid(robot.footprint);
   bool jumped = false;
   // A driving robot is where its next advert will put it before that advert arrives: the footprint moved
   // on by as much as it moved since the previous advert is excluded too (the cells a moving robot's front
@@ -208,8 +209,8 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   // (same stamp) keeps the motion; a new advert from a robot that stood still ends it.
   if (previous != nullptr && !previous->footprint.empty())
   {
-    const auto now = centroid(robot.footprint), before = centroid(previous->footprint);
-    const std::pair<double, double> step = { now.first - before.first, now.second - before.second };
+    const auto before = centroid(previous->footprint);
+    const std::pair<double, double> step = { here.first - before.first, here.second - before.second };
     jumped = std::hypot(step.first, step.second) > kMaxExtrapolatedMove;
     if (previous->stamp != robot.stamp)
     {
@@ -237,7 +238,6 @@ void FleetRobots::update(const FleetRobot& robot, const FleetRobot* previous, st
   // were taken. A footprint holds from its stamp until the next one's, so it is dropped once the next one is
   // older than the trail. The same footprint again is not rasterized again.
   std::deque<PastFootprint>& past = trail_[robot.name];
-  const auto here = centroid(robot.footprint);
   if (jumped || (!past.empty() && robot.stamp < past.back().stamp) || !drivable(past, here, robot.stamp))
   {
     past.clear();
