@@ -297,12 +297,17 @@ def test_a_body_reaching_past_the_footprint_is_caught():
     assert not inside_polygon(-0.375, 0.325, footprint)   # the old rear corner, origin -0.05
 
 
+def turning_radius():
+    """m a robot turning in place sweeps about its pose: its padded footprint's farthest corner."""
+    footprint, padding = footprint_of_config()
+    return max(math.hypot(x, y) for x, y in footprint) + padding
+
+
 @pytest.mark.parametrize("layout", sorted(LAYOUTS))
 def test_every_corridor_leaves_room_for_the_robot_turning_in_place(layout):
     """A robot turning in place sweeps the circle of its padded footprint's farthest corner; every corridor is
     wider than that circle with 0.1 m to spare on each side (the dead end's door, as wide as its block, too)."""
-    footprint, padding = footprint_of_config()
-    swept = 2 * (max(math.hypot(x, y) for x, y in footprint) + padding) + 2 * 0.1
+    swept = 2 * turning_radius() + 2 * 0.1
     for name, (x0, _y0, x1, _y1) in facility(layout)["corridors"].items():
         assert x1 - x0 >= swept, "%s corridor %s: %.2f m wide, the robot needs %.2f" % (layout, name, x1 - x0, swept)
     if layout == "deadend":
@@ -331,11 +336,10 @@ def distance_to_walls_and_blocks(x, y, m, blocks):
     return nearest
 
 
-def turning_room(layout):
+def turning_room():
     """m a robot needs from a goal to the nearest wall or block: it stops anywhere within xy_goal_tolerance and
-    then turns in place to the goal's yaw, sweeping the circle of its padded footprint's farthest corner."""
-    footprint, padding = footprint_of_config()
-    return max(math.hypot(x, y) for x, y in footprint) + padding + goal_tolerance_of_config()
+    then turns in place to the goal's yaw."""
+    return turning_radius() + goal_tolerance_of_config()
 
 
 @pytest.mark.parametrize("layout", sorted(LAYOUTS))
@@ -344,7 +348,7 @@ def test_every_goal_leaves_room_for_the_robot_turning_in_place_there(layout):
     corridor wall, robot_1 turned in place 0.15 m short for ever, its goal ACTIVE; Test 1's old wait_1, 0.45 m from
     it, was not reached in two tries of 120 s in CI."""
     desc, m = facility(layout), map_of(layout)
-    need = turning_room(layout)
+    need = turning_room()
     goals = dict(desc["goals"])
     goals.update({"bench_goals[%d]" % k: g for k, g in enumerate(desc.get("bench_goals", []))})
     for name, (x, y, _yaw) in sorted(goals.items()):
@@ -357,7 +361,7 @@ def test_a_goal_without_turning_room_is_caught():
     """The check above measures: Test 1's old wait_1 (11.75, 4.2) fails it, its new place passes, and a goal
     just inside and just outside the room at the facility's right corridor wall (x = 12.2) are told apart."""
     desc, m = facility("facility"), map_of("facility")
-    need = turning_room("facility")
+    need = turning_room()
     wall = 12.2
     assert distance_to_walls_and_blocks(11.75, 4.2, m, desc["blocks"]) < need
     assert distance_to_walls_and_blocks(*desc["goals"]["wait_1"][:2], m, desc["blocks"]) >= need
