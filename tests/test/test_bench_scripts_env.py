@@ -17,3 +17,15 @@ def test_a_bench_without_the_workspace_says_to_source_env_sh(script, args):
     assert out.returncode != 0
     assert "Traceback" not in out.stderr, out.stderr
     assert out.stderr.startswith(script + ": ") and "source scripts/env.sh" in out.stderr, out.stderr
+
+
+def test_a_bench_that_finds_our_modules_but_not_fleet_launch_says_so():
+    """fleet_tests importable (PYTHONPATH) but no ROS package path: fleet_launch_path names the package."""
+    bare = {"PATH": "/usr/bin:/bin", "HOME": os.environ.get("HOME", "/tmp"),
+            "PYTHONPATH": os.path.join(os.path.dirname(SCRIPTS), "src")}
+    out = subprocess.run([sys.executable, os.path.join(SCRIPTS, "bench_lifecycle"), "--delays", "10"], env=bare,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode != 0
+    assert "Traceback" not in out.stderr, out.stderr
+    assert out.stderr.startswith("bench_lifecycle: package fleet_launch not found: ") \
+        and "source scripts/env.sh" in out.stderr, out.stderr
